@@ -1,0 +1,3 @@
+from pendulab.cli.main import main
+
+raise SystemExit(main())

@@ -1,0 +1,170 @@
+"""Plant parameters as plain data, shared by the CasADi model, the FMU builder, the CLI and the fit.
+
+The parameter names are those of the specification and of the plant FMU's variables. Each field
+carries its unit and description as metadata, so the FMU's ``modelDescription.xml`` is written from
+this one place.
+
+Examples
+--------
+>>> from pendulab.model.parameters import PlantParameters
+>>> p = PlantParameters.preset(pendulum="long", cart="ip02")
+>>> round(p.lumped_cart_mass, 4)
+0.7031
+>>> p.with_values(Beq=5.0).Beq
+5.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, Iterator, Mapping
+
+from pendulab.errors import ParameterError
+
+PENDULUMS = ("long", "short", "none")
+CARTS = ("ip02", "ip02-weight", "ip01")
+
+
+def _p(value: float, unit: str, description: str, *, minimum: float = 0.0, positive: bool = False) -> Any:
+    return field(
+        default=value,
+        metadata={"unit": unit, "description": description, "min": minimum, "positive": positive},
+    )
+
+
+@dataclass(frozen=True)
+class PlantParameters:
+    """Every parameter of the cart-pendulum plant (SPEC §2), in SI units.
+
+    ``I_max = 0`` switches the amplifier current limit off; ``q_alpha = 0`` or ``q_x = 0`` switches
+    that encoder's quantization off; ``F1 = F2 = 0`` switches stick-slip friction off.
+    """
+
+    # pendulum (defaults: long, 24 in)
+    Mp: float = _p(0.230, "kg", "Pendulum mass")
+    Lp: float = _p(0.6413, "m", "Pendulum length, pivot to tip")
+    lp: float = _p(0.3302, "m", "Pivot to pendulum centre of gravity")
+    Ip: float = _p(0.230 * 0.6413**2 / 12, "kg.m2", "Pendulum inertia about its centre of gravity")
+    Bp: float = _p(0.0024, "N.m.s/rad", "Viscous damping at the pendulum pivot")
+    # cart and motor (defaults: IP02, no load)
+    M_cart: float = _p(0.57, "kg", "Cart mass without the motor's rotor inertia", positive=True)
+    Beq: float = _p(4.3, "N.s/m", "Equivalent viscous damping of the cart")
+    Rm: float = _p(2.6, "Ohm", "Motor armature resistance", positive=True)
+    Kt: float = _p(0.007683, "N.m/A", "Motor torque constant", positive=True)
+    Km: float = _p(0.007678, "V.s/rad", "Motor back-EMF constant")
+    Kg: float = _p(3.71, "1", "Planetary gearbox ratio", positive=True)
+    eta_g: float = _p(1.0, "1", "Gearbox efficiency", positive=True)
+    eta_m: float = _p(1.0, "1", "Motor efficiency", positive=True)
+    Jm: float = _p(3.90e-7, "kg.m2", "Rotor moment of inertia")
+    r_mp: float = _p(6.35e-3, "m", "Motor pinion radius", positive=True)
+    force_gain: float = _p(1.0, "1", "Calibration factor on the motor force", positive=True)
+    g: float = _p(9.81, "m/s2", "Gravitational acceleration")
+    # amplifier
+    V_max: float = _p(10.0, "V", "Amplifier voltage saturation", positive=True)
+    I_max: float = _p(0.0, "A", "Amplifier current limit (0 = no limit)")
+    # stick-slip friction vector [F1, v1, F2, v2, B]
+    F1: float = _p(1.5, "N", "Stiction: the cart sticks below this motor force")
+    v1: float = _p(0.005, "m/s", "Stiction: the cart can stick below this speed")
+    F2: float = _p(3.0, "N", "Slip: strong viscous drag below this motor force")
+    v2: float = _p(0.05, "m/s", "Slip: strong viscous drag below this speed")
+    B: float = _p(20.0, "kg/s", "Slip: viscous drag coefficient")
+    # encoders
+    q_alpha: float = _p(0.001, "rad", "Angle encoder step (0 = no quantization)")
+    q_x: float = _p(22.75e-6, "m", "Cart encoder step (0 = no quantization)")
+    # poke: a rectangular pulse added to the angular acceleration
+    poke_magnitude: float = _p(50.0, "rad/s2", "Poke magnitude", minimum=-math.inf)
+    poke_duration: float = _p(0.005, "s", "Poke duration")
+    poke_start: float = _p(1.0, "s", "Poke start time")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool):
+                raise ParameterError(f"parameter {f.name}={value!r} is not a number; give a real value in {f.metadata['unit']}")
+            if not math.isfinite(value):
+                raise ParameterError(f"parameter {f.name}={value} is not finite; give a finite value in {f.metadata['unit']}")
+            if value < f.metadata["min"]:
+                raise ParameterError(f"parameter {f.name}={value} is negative; it must be >= 0 {f.metadata['unit']}")
+            if f.metadata["positive"] and value <= 0:
+                raise ParameterError(f"parameter {f.name}={value} must be > 0 {f.metadata['unit']}")
+        if self.Mp > 0 and self.Ip + self.Mp * self.lp**2 <= 0:
+            raise ParameterError("the pendulum has mass but no inertia: set lp > 0 or Ip > 0")
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def preset(cls, pendulum: str = "long", cart: str = "ip02", **overrides: float) -> "PlantParameters":
+        """Parameters of a lab configuration.
+
+        Parameters
+        ----------
+        pendulum : {"long", "short", "none"}
+            24 in or 12 in pendulum, or ``"none"`` for the cart alone (calibration ramps).
+        cart : {"ip02", "ip02-weight", "ip01"}
+            IP02 without load (default), IP02 with its extra weight, or the IP01.
+        **overrides
+            Any field by name.
+        """
+        if pendulum not in PENDULUMS:
+            raise ParameterError(f"unknown pendulum {pendulum!r}; choose one of {', '.join(PENDULUMS)}")
+        if cart not in CARTS:
+            raise ParameterError(f"unknown cart {cart!r}; choose one of {', '.join(CARTS)}")
+        values: dict[str, float] = {}
+        if pendulum == "short":
+            values.update(Mp=0.127, Lp=0.3365, lp=0.1778, Ip=0.127 * 0.3365**2 / 12)
+        elif pendulum == "none":
+            values.update(Mp=0.0, Lp=0.0, lp=0.0, Ip=0.0, Bp=0.0)
+        if cart == "ip02-weight":
+            values.update(M_cart=0.94, Beq=5.4)
+        elif cart == "ip01":
+            values.update(M_cart=0.52, Beq=0.9)
+        values.update(overrides)
+        return cls.from_mapping(values)
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, float]) -> "PlantParameters":
+        """Build from a mapping of field names; unknown names are an error."""
+        unknown = sorted(set(values) - set(cls.names()))
+        if unknown:
+            raise ParameterError(f"unknown plant parameter {unknown[0]!r}; known ones are {', '.join(cls.names())}")
+        return cls(**{k: float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v for k, v in values.items()})
+
+    def with_values(self, **values: float) -> "PlantParameters":
+        """A copy with some fields changed (validated like a new object)."""
+        return type(self).from_mapping({**self.as_dict(), **values})
+
+    # ------------------------------------------------------------------ views
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """Field names in their fixed order (the order of the CasADi parameter vector)."""
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def describe(cls) -> Iterator[tuple[str, float, str, str]]:
+        """``(name, default, unit, description)`` for every field."""
+        for f in fields(cls):
+            yield f.name, f.default, f.metadata["unit"], f.metadata["description"]
+
+    def as_dict(self) -> dict[str, float]:
+        return dataclasses.asdict(self)
+
+    def as_vector(self) -> list[float]:
+        return [getattr(self, n) for n in self.names()]
+
+    @property
+    def friction(self) -> tuple[float, float, float, float, float]:
+        """The friction vector ``[F1, v1, F2, v2, B]``."""
+        return (self.F1, self.v1, self.F2, self.v2, self.B)
+
+    @property
+    def lumped_cart_mass(self) -> float:
+        """``Mc = M_cart + eta_g Kg^2 Jm / r_mp^2``: the cart with the rotor inertia lumped in."""
+        return self.M_cart + self.eta_g * self.Kg**2 * self.Jm / self.r_mp**2
+
+    def without_nonlinearities(self) -> "PlantParameters":
+        """Friction, quantization, current limit and poke off (the linearization's assumptions)."""
+        return self.with_values(F1=0.0, F2=0.0, q_alpha=0.0, q_x=0.0, I_max=0.0, poke_magnitude=0.0)
+
+
+FRICTION_NAMES = ("F1", "v1", "F2", "v2", "B")
