@@ -1,0 +1,61 @@
+"""The ``pendulab`` console command: one entry point, one module per subcommand.
+
+Each subcommand module under :mod:`pendulab.cli` exposes ``register(subparsers)``, which adds its
+parser and sets ``func`` to a callable taking the parsed arguments and returning an exit status.
+User mistakes raise :class:`~pendulab.errors.UserError`: one line on stderr, exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from pendulab import __version__
+from pendulab.errors import UserError
+
+#: Subcommand modules, in the order ``--help`` lists them.
+SUBCOMMANDS = ("simulate", "tf", "build_fmus", "calibrate", "fit")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line and exit status 2 (argparse prints the usage too)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UserError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="pendulab", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"pendulab {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f"pendulab.cli.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"pendulab.cli.{name}":
+                raise
+            continue
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"pendulab: error: {exc}", file=sys.stderr)
+        return exc.exit_status
+    except KeyboardInterrupt:
+        print("pendulab: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
