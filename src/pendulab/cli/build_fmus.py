@@ -1,0 +1,32 @@
+"""``pendulab build-fmus``: build the native FMUs."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pendulab.errors import FmuBuildError, UserError
+from pendulab.fmu.build import build_all, default_fmu_dir
+from pendulab.fmu.models import MODELS
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "build-fmus", help="build the plant, controller and supervisor FMUs", description="Build the native FMI 2.0 FMUs."
+    )
+    parser.add_argument("names", nargs="*", metavar="NAME", help=f"FMUs to build (default all: {', '.join(MODELS)})")
+    parser.add_argument("--out", type=Path, metavar="DIR", help=f"output folder (default {default_fmu_dir()})")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    unknown = [n for n in args.names if n not in MODELS]
+    if unknown:
+        raise UserError(f"unknown FMU {unknown[0]!r}; choose from {', '.join(MODELS)}")
+    try:
+        paths = build_all(args.out, args.names or None)
+    except FmuBuildError as exc:
+        raise UserError(str(exc).splitlines()[0]) from exc
+    for path in paths:
+        print(f"built {path}")
+    return 0

@@ -1,0 +1,181 @@
+"""Build pendulab's native FMUs: shared wrapper + one model folder -> ``fmus/<Name>.fmu``.
+
+Examples
+--------
+>>> from pendulab.fmu.build import ensure_fmu
+>>> path = ensure_fmu("Plant")          # builds fmus/Plant.fmu on first use   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Callable, Iterable
+
+import fmpy
+
+from pendulab.errors import FmuBuildError
+from pendulab.fmu.description import ModelSpec, model_description_xml, variables_header
+from pendulab.fmu.models import MODELS
+
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+WRAPPER_DIR = Path(__file__).resolve().parent / "c"
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+FMI_HEADERS = Path(fmpy.__file__).resolve().parent / "c-code"
+WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
+_STAMP = "pendulab-build "
+
+
+def default_fmu_dir() -> Path:
+    """``fmus/`` at the repository root when run from a checkout, else a per-user cache folder."""
+    override = os.environ.get("PENDULAB_FMU_DIR")
+    if override:
+        return Path(override)
+    repo = PACKAGE_DIR.parents[1]
+    if (repo / "build_fmus.py").is_file():
+        return repo / "fmus"
+    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    return cache / "pendulab" / "fmus"
+
+
+def source_hash() -> str:
+    """Hash of everything an FMU is built from; a change rebuilds the FMUs on next use."""
+    digest = hashlib.sha256()
+    for folder in ("fmu", "model"):
+        for path in sorted((PACKAGE_DIR / folder).rglob("*")):
+            if path.suffix in (".py", ".c", ".h") and "__pycache__" not in path.parts:
+                digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def model_spec(name: str) -> ModelSpec:
+    if name not in MODELS:
+        raise FmuBuildError(f"unknown FMU {name!r}; known ones are {', '.join(MODELS)}")
+    return importlib.import_module(MODELS[name]).spec()
+
+
+def _platform_dir() -> str:
+    machine = "64" if sys.maxsize > 2**32 else "32"
+    return {"Linux": f"linux{machine}", "Darwin": "darwin64", "Windows": f"win{machine}"}[platform.system()]
+
+
+def _compile(compiler: str, sources: list[Path], include_dirs: list[Path], output: Path, windows: bool) -> None:
+    flags = ["-shared", "-O2", "-std=c99", "-fno-math-errno", "-fvisibility=hidden"]
+    if not windows:
+        flags.append("-fPIC")
+    else:
+        flags.append("-static-libgcc")
+    command = [compiler, *flags, *(f"-I{d}" for d in include_dirs), *map(str, sources), "-o", str(output), "-lm"]
+    result = subprocess.run(command, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise FmuBuildError(f"compiling {output.name} failed:\n{' '.join(command)}\n{result.stderr}")
+
+
+def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = True) -> Path:
+    """Build ``<out_dir>/<name>.fmu`` (FMI 2.0, native binary, with ``sources/``).
+
+    Parameters
+    ----------
+    name : {"Plant", "Controller", "Supervisor"}
+    out_dir : Path, optional
+        Default :func:`default_fmu_dir`.
+    cross_compile : bool
+        Also build a win64 binary where the mingw-w64 cross compiler is installed.
+    """
+    out_dir = Path(out_dir or default_fmu_dir())
+    out_dir.mkdir(parents=True, exist_ok=True)
+    compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not compiler:
+        raise FmuBuildError("no C compiler found: install gcc (e.g. 'apt-get install gcc') to build the FMUs")
+    spec = model_spec(name)
+    model_dir = MODELS_DIR / name.lower()
+    with tempfile.TemporaryDirectory(prefix=f"pendulab-{name}-") as tmp:
+        root = Path(tmp) / "fmu"
+        sources_dir = root / "sources"
+        sources_dir.mkdir(parents=True)
+        for path in WRAPPER_DIR.iterdir():
+            shutil.copy(path, sources_dir / path.name)
+        for path in model_dir.iterdir():
+            if path.suffix in (".c", ".h"):
+                shutil.copy(path, sources_dir / path.name)
+        for filename, text in spec.generated.items():
+            (sources_dir / filename).write_text(text)
+        (sources_dir / "variables.h").write_text(variables_header(spec))
+        c_files = ["fmi2_wrapper.c", *spec.sources]
+        (root / "modelDescription.xml").write_text(model_description_xml(spec, c_files))
+        (sources_dir / "buildDescription.xml").write_text(_build_description(spec.identifier, c_files))
+
+        binaries = root / "binaries"
+        suffix = {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}[platform.system()]
+        native = binaries / _platform_dir() / f"{spec.identifier}{suffix}"
+        native.parent.mkdir(parents=True)
+        sources = [sources_dir / f for f in c_files]
+        _compile(compiler, sources, [sources_dir, FMI_HEADERS], native, windows=platform.system() == "Windows")
+        if cross_compile and platform.system() != "Windows" and shutil.which(WIN64_COMPILER):
+            win = binaries / "win64" / f"{spec.identifier}.dll"
+            win.parent.mkdir(parents=True)
+            _compile(WIN64_COMPILER, sources, [sources_dir, FMI_HEADERS], win, windows=True)
+
+        # Write next to the target and rename: a reader never sees a half-written FMU.
+        fd, partial = tempfile.mkstemp(dir=out_dir, prefix=f".{name}-", suffix=".fmu.part")
+        os.close(fd)
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+            for path in sorted(root.rglob("*")):
+                if path.is_file():
+                    zf.write(path, path.relative_to(root).as_posix())
+            zf.comment = (_STAMP + source_hash()).encode()
+        target = out_dir / f"{name}.fmu"
+        os.replace(partial, target)
+    return target
+
+
+def _build_description(identifier: str, c_files: Iterable[str]) -> str:
+    files = "\n".join(f'      <SourceFile name="{f}"/>' for f in c_files)
+    return (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        '<fmiBuildDescription fmiVersion="3.0">\n'
+        f'  <BuildConfiguration modelIdentifier="{identifier}">\n'
+        '    <SourceFileSet language="C99">\n'
+        f"{files}\n"
+        "    </SourceFileSet>\n"
+        "  </BuildConfiguration>\n"
+        "</fmiBuildDescription>\n"
+    )
+
+
+def is_current(path: Path) -> bool:
+    """Whether ``path`` is an FMU built from the current sources."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return zf.comment.decode(errors="replace") == _STAMP + source_hash()
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
+def ensure_fmu(name: str, out_dir: Path | None = None, *, progress: Callable[[str], None] | None = None) -> Path:
+    """Path of ``<name>.fmu``, built first if it is missing or older than the sources."""
+    out_dir = Path(out_dir or default_fmu_dir())
+    path = out_dir / f"{name}.fmu"
+    if not is_current(path):
+        if progress:
+            progress(f"building {name}.fmu (first use) ...")
+        build_fmu(name, out_dir)
+    return path
+
+
+def build_all(out_dir: Path | None = None, names: Iterable[str] | None = None, *, progress: Callable[[str], None] = print) -> list[Path]:
+    """Build every FMU (or the named ones) and return their paths."""
+    paths = []
+    for name in names or MODELS:
+        progress(f"building {name}.fmu")
+        paths.append(build_fmu(name, out_dir))
+    return paths

@@ -1,0 +1,235 @@
+"""Small data classes that describe an FMU's variables, and the two files written from them.
+
+One variable table per model (in ``pendulab/fmu/models/<name>/config.py``) produces both the
+``modelDescription.xml`` and the C header ``variables.h`` with the value references, so the two can
+never disagree.
+
+Examples
+--------
+>>> v = Variable("V", "Real", causality="input", start=0.0, unit="V", description="Voltage command")
+>>> v.causality
+'input'
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import uuid
+from dataclasses import dataclass, field
+from typing import Literal, Sequence
+from xml.sax.saxutils import quoteattr
+
+BaseType = Literal["Real", "Integer", "Boolean"]
+GENERATOR = "pendulab"
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One scalar variable of an FMU (FMI 2.0 ``ScalarVariable``)."""
+
+    name: str
+    type: BaseType
+    causality: str = "local"  # parameter | input | output | local | calculatedParameter
+    variability: str | None = None  # default: fixed for parameters, discrete for non-Real, else continuous
+    start: float | int | bool | None = None
+    unit: str = ""
+    description: str = ""
+    initial: str | None = None
+    derivative_of: str | None = None  # name of the state this is the derivative of
+    c_name: str | None = None  # identifier in variables.h (default: name with non-identifier characters replaced)
+
+    @property
+    def resolved_variability(self) -> str:
+        if self.variability:
+            return self.variability
+        if self.causality == "parameter":
+            return "fixed"
+        return "continuous" if self.type == "Real" else "discrete"
+
+    @property
+    def identifier(self) -> str:
+        return self.c_name or re.sub(r"\W+", "_", self.name).strip("_")
+
+
+@dataclass
+class ModelSpec:
+    """Everything the builder needs for one FMU.
+
+    Attributes
+    ----------
+    identifier : str
+        Model identifier: the binary's name and the ``.fmu`` file's stem.
+    states : sequence of str
+        Names of the continuous states; empty for a Co-Simulation-only model.
+    sources : list of str
+        C files (in the model folder or generated) compiled with the shared wrapper.
+    generated : dict
+        Extra files written at build time (file name -> text), e.g. CasADi's generated C.
+    defines : dict
+        Extra ``#define`` lines for ``variables.h``.
+    """
+
+    identifier: str
+    description: str
+    variables: list[Variable]
+    states: Sequence[str] = ()
+    sources: list[str] = field(default_factory=lambda: ["model.c"])
+    generated: dict[str, str] = field(default_factory=dict)
+    defines: dict[str, str] = field(default_factory=dict)
+    default_step: float = 1e-3
+
+    @property
+    def model_exchange(self) -> bool:
+        return bool(self.states)
+
+    def value_references(self) -> dict[str, int]:
+        """Value references: consecutive per base type, in table order."""
+        counters: dict[str, int] = {"Real": 0, "Integer": 0, "Boolean": 0}
+        refs = {}
+        for v in self.variables:
+            refs[v.name] = counters[v.type]
+            counters[v.type] += 1
+        return refs
+
+    def count(self, base_type: str) -> int:
+        return sum(v.type == base_type for v in self.variables)
+
+    @property
+    def guid(self) -> str:
+        """A GUID that changes whenever the variables or the generated code change."""
+        digest = hashlib.sha256()
+        for v in self.variables:
+            digest.update(repr(v).encode())
+        for name in sorted(self.generated):
+            digest.update(name.encode() + self.generated[name].encode())
+        return "{" + str(uuid.UUID(bytes=digest.digest()[:16])) + "}"
+
+
+def _literal(value: float | int | bool) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    return repr(float(value))
+
+
+def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
+    """The ``modelDescription.xml`` text (FMI 2.0)."""
+    refs = spec.value_references()
+    index = {v.name: k + 1 for k, v in enumerate(spec.variables)}
+    units = sorted({v.unit for v in spec.variables if v.unit})
+    files = "".join(f'\n      <File name="{name}"/>' for name in source_files)
+    lines = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        "<fmiModelDescription",
+        '  fmiVersion="2.0"',
+        f"  modelName={quoteattr(spec.identifier)}",
+        f'  guid="{spec.guid}"',
+        f"  description={quoteattr(spec.description)}",
+        f'  generationTool="{GENERATOR}"',
+        '  variableNamingConvention="structured"',
+        f'  numberOfEventIndicators="0">',
+    ]
+    if spec.model_exchange:
+        lines.append(
+            f'  <ModelExchange modelIdentifier="{spec.identifier}" canNotUseMemoryManagementFunctions="true">'
+            f"\n    <SourceFiles>{files}\n    </SourceFiles>\n  </ModelExchange>"
+        )
+    lines.append(
+        f'  <CoSimulation modelIdentifier="{spec.identifier}" canHandleVariableCommunicationStepSize="true"'
+        f' canNotUseMemoryManagementFunctions="true">'
+        f"\n    <SourceFiles>{files}\n    </SourceFiles>\n  </CoSimulation>"
+    )
+    if units:
+        lines.append("  <UnitDefinitions>")
+        lines += [f"    <Unit name={quoteattr(u)}/>" for u in units]
+        lines.append("  </UnitDefinitions>")
+    lines.append("  <LogCategories>")
+    lines.append('    <Category name="logStatusError" description="Errors"/>')
+    lines.append('    <Category name="logEvents" description="State changes and events"/>')
+    lines.append("  </LogCategories>")
+    lines.append(f'  <DefaultExperiment startTime="0" stopTime="10" stepSize="{spec.default_step!r}"/>')
+    lines.append("  <ModelVariables>")
+    for v in spec.variables:
+        attrs = [f"name={quoteattr(v.name)}", f'valueReference="{refs[v.name]}"']
+        if v.description:
+            attrs.append(f"description={quoteattr(v.description)}")
+        attrs.append(f'causality="{v.causality}"')
+        attrs.append(f'variability="{v.resolved_variability}"')
+        if v.initial:
+            attrs.append(f'initial="{v.initial}"')
+        inner = []
+        if v.unit and v.type == "Real":
+            inner.append(f"unit={quoteattr(v.unit)}")
+        if v.derivative_of:
+            inner.append(f'derivative="{index[v.derivative_of]}"')
+        if v.start is not None:
+            if isinstance(v.start, float) and not math.isfinite(v.start):
+                raise ValueError(f"start value of {v.name} must be finite")
+            inner.append(f'start="{_literal(v.start)}"')
+        lines.append(f"    <!-- {index[v.name]} -->")
+        lines.append(f"    <ScalarVariable {' '.join(attrs)}>")
+        lines.append(f"      <{v.type} {' '.join(inner)}/>")
+        lines.append("    </ScalarVariable>")
+    lines.append("  </ModelVariables>")
+    lines.append("  <ModelStructure>")
+    outputs = [v for v in spec.variables if v.causality == "output"]
+    if outputs:
+        lines.append("    <Outputs>")
+        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in outputs]
+        lines.append("    </Outputs>")
+    derivatives = [v for v in spec.variables if v.derivative_of]
+    if derivatives:
+        lines.append("    <Derivatives>")
+        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in derivatives]
+        lines.append("    </Derivatives>")
+    initial_unknowns = [
+        v
+        for v in spec.variables
+        if (v.causality == "output" and v.initial in (None, "calculated", "approx"))
+        or v.causality == "calculatedParameter"
+        or (v.derivative_of and spec.model_exchange)
+    ]
+    if initial_unknowns:
+        lines.append("    <InitialUnknowns>")
+        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in sorted(initial_unknowns, key=lambda v: index[v.name])]
+        lines.append("    </InitialUnknowns>")
+    lines.append("  </ModelStructure>")
+    lines.append("</fmiModelDescription>")
+    return "\n".join(lines) + "\n"
+
+
+def variables_header(spec: ModelSpec) -> str:
+    """The C header ``variables.h``: identifier, GUID, value references and start values."""
+    refs = spec.value_references()
+    out = [
+        f"/* Generated by pendulab from the variable table of {spec.identifier}: do not edit. */",
+        "#ifndef PENDULAB_VARIABLES_H",
+        "#define PENDULAB_VARIABLES_H",
+        f"#define MODEL_IDENTIFIER {spec.identifier}",
+        f'#define MODEL_GUID "{spec.guid}"',
+        f"#define N_STATES {len(spec.states)}",
+    ]
+    for base in ("Real", "Integer", "Boolean"):
+        out.append(f"#define N_{base.upper()}S {spec.count(base)}")
+    for v in spec.variables:
+        out.append(f"#define VR_{v.identifier} {refs[v.name]}  /* {v.type} {v.name} */")
+    for name, value in spec.defines.items():
+        out.append(f"#define {name} {value}")
+    for base, c_type, array in (("Real", "double", "REAL_START"), ("Integer", "int", "INTEGER_START"), ("Boolean", "int", "BOOLEAN_START")):
+        values = [_c_literal(v.start) for v in spec.variables if v.type == base]
+        out.append(f"static const {c_type} {array}[{max(1, len(values))}] = {{{', '.join(values) or '0'}}};")
+    out.append("#endif")
+    return "\n".join(out) + "\n"
+
+
+def _c_literal(value: float | int | bool | None) -> str:
+    if value is None:
+        return "0"
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, int):
+        return str(value)
+    return repr(float(value))
