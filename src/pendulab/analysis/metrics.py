@@ -1,0 +1,350 @@
+"""Response metrics of a poke run (SPEC §7), measured from the poke on.
+
+The response to a poke is a damped oscillation of the angle about its final value. The metrics are
+read from it the way a student reads them off a plot, but robustly: the signal may be the true angle
+of a simulation or the rig's quantized (staircase) encoder angle ``alpha_measured``.
+
+How the signal is read
+----------------------
+* The *initial value* is the angle just before the poke (median of the last 0.1 s, so a quantized
+  signal toggling between two steps gives a sensible value).
+* The *final value* is the mean of the last 10 % of the record after the poke; it is reported
+  only when the angle settled (stayed in the settling band for at least that last 10 %).
+* The deviation from the final value is split into *lobes* (swings to one side) with a hysteresis
+  of one encoder step, so the staircase of a quantized signal never creates spurious swings.
+  The extremum of a lobe is taken at the middle of its plateau (a quantized peak is flat).
+* The damped frequency comes from the crossings of the final value between lobes, fitted as
+  ``c_k = c_0 + k * pi / omega_d + (-1)^k * beta``; the ``beta`` term absorbs the alternating
+  offset that quantization gives to up- and down-going crossings.
+
+Values that cannot be determined are ``None`` (JSON ``null``), never NaN.
+
+Examples
+--------
+>>> import numpy as np
+>>> t = np.arange(0.0, 6.0, 1e-3)
+>>> tau = np.clip(t - 1.0, 0.0, None)
+>>> alpha = 0.05 * np.exp(-2.0 * tau) * np.sin(8.0 * tau)
+>>> m = compute_metrics(t, alpha, poke_start=1.0)
+>>> round(m["natural_frequency_rad_s"], 3), m["stable"]
+(8.0, True)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pendulab.errors import UserError
+
+METRIC_KEYS = (
+    "natural_frequency_rad_s",
+    "peak_time_s",
+    "overshoot_percent",
+    "settling_time_s",
+    "final_value_rad",
+    "cart_speed_change_m_s",
+    "safety_cut_time_s",
+    "stable",
+)
+
+#: An angle beyond this (rad) means the pendulum has fallen: the response is not bounded.
+FALLEN_ANGLE = math.pi / 2
+#: Fraction of the record after the poke over which the final value is averaged (and for which the
+#: angle must stay inside the settling band for the response to count as settled).
+TAIL_FRACTION = 0.10
+#: Settling band relative to the first peak (SPEC §7: 2 %).
+SETTLING_FRACTION = 0.02
+
+
+@dataclass(frozen=True)
+class _Lobe:
+    """One swing of the deviation to one side of the reference."""
+
+    sign: int
+    start: int  # first index with |dev| > h on this side
+    end: int  # last index before the deviation leaves this side (exclusive of the next lobe)
+    peak_index: int  # an index of the extremum (for its value)
+    peak_time: float  # middle of the extremum's plateau
+    closed: bool  # the signal turned back by more than the hysteresis after the extremum
+
+
+def compute_metrics(
+    t: Any,
+    alpha: Any,
+    *,
+    poke_start: float,
+    q_alpha: float = 0.001,
+    xdot: Any = None,
+    safety_cut_time: float | None = None,
+) -> dict[str, Any]:
+    """Metrics of the angle's response to a poke, with exactly the keys of SPEC §7.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample times (s), strictly increasing.
+    alpha : array_like
+        Pendulum angle from upright (rad): the true angle when available, or the quantized
+        ``alpha_measured`` (the rig gives only that).
+    poke_start : float
+        Time the poke starts (s); every metric is measured from it.
+    q_alpha : float
+        Angle encoder step (rad). It sets the hysteresis against staircase artefacts and the
+        smallest settling band; 0 for an unquantized signal.
+    xdot : array_like, optional
+        Cart speed (m/s) at the same times, for ``cart_speed_change_m_s``.
+    safety_cut_time : float, optional
+        Time the supervisor cut the motor (s), or None. After a cut the response is only read up
+        to the cut, and the run is not stable.
+
+    Returns
+    -------
+    dict
+        ``natural_frequency_rad_s`` damped oscillation frequency; ``peak_time_s`` poke start to
+        the first peak of ``|alpha - initial|``; ``overshoot_percent`` first swing back past the
+        final value relative to the first peak (0 when the response settles without crossing);
+        ``settling_time_s`` poke start until the angle stays within
+        ``max(2 % of the first peak, q_alpha)`` of the final value (and stays there for at least
+        the last 10 % of the record); ``final_value_rad`` (None unless settled);
+        ``cart_speed_change_m_s`` xdot at the end minus xdot just before the poke;
+        ``safety_cut_time_s``; ``stable`` (no cut, bounded, settled). Undeterminable values are
+        None.
+
+    Raises
+    ------
+    UserError
+        Arrays of different lengths, too short, non-increasing times, or a poke outside the record.
+    """
+    t, alpha = _as_1d("t", t), _as_1d("alpha", alpha)
+    if t.size != alpha.size:
+        raise UserError(f"t has {t.size} samples but alpha has {alpha.size}; give both at the same times")
+    if t.size < 3:
+        raise UserError(f"the record has {t.size} samples; metrics need at least 3")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise UserError("the time column is not strictly increasing and finite; give samples in time order")
+    poke_start = float(poke_start)
+    if not math.isfinite(poke_start) or not t[0] <= poke_start < t[-1]:
+        raise UserError(
+            f"the poke starts at t={poke_start:g} s, outside the record [{t[0]:g}, {t[-1]:g}] s; "
+            "set the poke start inside the run (or lengthen the run)"
+        )
+    q = float(q_alpha)
+    if not math.isfinite(q) or q < 0:
+        raise UserError(f"q_alpha={q_alpha} must be a finite step >= 0 rad")
+    cut = None if safety_cut_time is None else float(safety_cut_time)
+    if cut is not None and not math.isfinite(cut):
+        raise UserError(f"safety_cut_time={safety_cut_time} is not finite; give the cut time in s or None")
+
+    metrics: dict[str, Any] = {key: None for key in METRIC_KEYS}
+    metrics["safety_cut_time_s"] = cut
+    if xdot is not None:
+        metrics["cart_speed_change_m_s"] = _speed_change(t, _as_1d("xdot", xdot), poke_start)
+
+    initial = _initial_value(t, alpha, poke_start)
+
+    # The analysed window: from the poke to the end, or to the cut, or to the first non-finite sample.
+    finite = np.isfinite(alpha)
+    last = t.size if finite.all() else int(np.argmin(finite))
+    window = (t >= poke_start) & (np.arange(t.size) < last)
+    if cut is not None:
+        window &= t <= cut
+    idx = np.flatnonzero(window)
+    bounded = bool(finite.all() and np.max(np.abs(alpha)) < FALLEN_ANGLE)
+    if idx.size < 3 or not math.isfinite(initial):
+        metrics["stable"] = False
+        return metrics
+    tw, aw = t[idx], alpha[idx]
+
+    # Final value: only meaningful if the run went on to its end with the pendulum up; it is
+    # reported once the angle is known to have settled there.
+    final = None
+    if cut is None and bounded:
+        n_tail = max(1, int(round(TAIL_FRACTION * idx.size)))
+        final = float(np.mean(aw[-n_tail:]))
+    reference = final if final is not None else initial
+
+    amplitude = float(np.max(np.abs(aw - initial)))
+    tiny = 1e-12 * max(1.0, abs(initial))
+    if amplitude <= max(q, tiny):
+        # No measurable response (within one encoder step): nothing oscillated, nothing to settle.
+        metrics["stable"] = bool(cut is None and bounded)
+        metrics["final_value_rad"] = final
+        return metrics
+
+    # Hysteresis: one encoder step, and never below 1 % of the response (numerical noise).
+    h = max(q, 0.01 * amplitude)
+    lobes = _lobes(tw, aw - reference, h)
+
+    # First peak: the first swing in the direction the poke moved the angle. The departure must be
+    # a tenth of the response and clearly beyond any offset between initial and final value, so
+    # that offset cannot fake a direction.
+    threshold = max(h, 0.1 * amplitude, 2.0 * abs(reference - initial))
+    departed = np.flatnonzero(np.abs(aw - initial) > threshold)
+    direction = int(np.sign(aw[departed[0]] - initial)) if departed.size else 0
+    first = next((k for k, lobe in enumerate(lobes) if lobe.sign == direction), None)
+    peak_dev = None
+    if first is not None and lobes[first].closed:
+        lobe = lobes[first]
+        peak_dev = abs(float(aw[lobe.peak_index]) - initial)
+        metrics["peak_time_s"] = lobe.peak_time - poke_start
+
+    # Settling: the last time the angle entered the band around the final value for good.
+    settled = False
+    if final is not None and peak_dev is not None:
+        band = max(SETTLING_FRACTION * peak_dev, q)
+        # A staircase signal is up to half a step off the true angle, and its final value (a mean)
+        # lies between steps: allow that half step, or a signal resting one step off never settles.
+        slack = 0.5 * q if _is_quantized(aw, q) else 0.0
+        outside = np.abs(aw - final) > (band + slack) * (1 + 1e-9)
+        if not outside.any():
+            t_settle = tw[0]
+        elif outside[-1]:
+            t_settle = None
+        else:
+            j = int(np.flatnonzero(outside)[-1])
+            t_settle = _band_entry(tw, np.abs(aw - final), band + slack, j)
+        hold = TAIL_FRACTION * (tw[-1] - tw[0])
+        if t_settle is not None and tw[-1] - t_settle >= hold:
+            settled = True
+            metrics["settling_time_s"] = max(0.0, float(t_settle) - poke_start)
+            metrics["final_value_rad"] = final
+
+    if first is not None and metrics["peak_time_s"] is not None:
+        following = lobes[first + 1 :]
+        peak_from_ref = abs(float(aw[lobes[first].peak_index]) - reference)
+        if following and following[0].closed and peak_from_ref > 0:
+            swing = abs(float(aw[following[0].peak_index]) - reference)
+            metrics["overshoot_percent"] = 100.0 * swing / peak_from_ref
+        elif not following and settled:
+            metrics["overshoot_percent"] = 0.0  # came back without swinging past the final value
+        metrics["natural_frequency_rad_s"] = _damped_frequency(tw, aw - reference, lobes[first:])
+
+    metrics["stable"] = bool(cut is None and bounded and settled)
+    return metrics
+
+
+# ---------------------------------------------------------------------------------------- helpers
+def _as_1d(name: str, values: Any) -> np.ndarray:
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{name} is not a numeric array ({exc}); give a sequence of numbers") from None
+    if array.ndim != 1:
+        array = array.reshape(-1) if array.size in array.shape else array
+    if array.ndim != 1:
+        raise UserError(f"{name} has shape {array.shape}; give a 1-D array (a column of samples)")
+    return array
+
+
+def _is_quantized(values: np.ndarray, q: float) -> bool:
+    """True when every value is a whole number of encoder steps ``q`` (an encoder's staircase)."""
+    if q <= 0:
+        return False
+    steps = values / q
+    return bool(np.all(np.abs(steps - np.round(steps)) < 1e-6))
+
+
+def _initial_value(t: np.ndarray, alpha: np.ndarray, poke_start: float) -> float:
+    """Median of the angle over the last 0.1 s before the poke (the first sample if none)."""
+    before = (t < poke_start) & (t >= poke_start - 0.1)
+    values = alpha[before] if before.any() else alpha[:1]
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else math.nan
+
+
+def _speed_change(t: np.ndarray, xdot: np.ndarray, poke_start: float) -> float | None:
+    if xdot.size != t.size:
+        raise UserError(f"xdot has {xdot.size} samples but t has {t.size}; give both at the same times")
+    before = np.flatnonzero(t < poke_start)
+    start = xdot[before[-1]] if before.size else xdot[0]
+    end = xdot[np.isfinite(xdot)]
+    if not math.isfinite(start) or end.size == 0:
+        return None
+    return float(end[-1] - start)
+
+
+def _lobes(t: np.ndarray, dev: np.ndarray, h: float) -> list[_Lobe]:
+    """Split ``dev`` into swings beyond ``±h`` (hysteresis: a swing ends when the other side is reached)."""
+    side = np.where(dev > h, 1, np.where(dev < -h, -1, 0))
+    marks = np.flatnonzero(side != 0)
+    if marks.size == 0:
+        return []
+    # Each change of side among the marked samples starts a new lobe.
+    changes = np.flatnonzero(np.diff(side[marks]) != 0) + 1
+    starts = np.concatenate(([0], changes))
+    ends = np.concatenate((changes, [marks.size]))
+    lobes = []
+    for a, b in zip(starts, ends):
+        first, last_marked = int(marks[a]), int(marks[b - 1])
+        # The lobe's extent runs until the next lobe begins (or the end of the record).
+        stop = int(marks[b]) if b < marks.size else dev.size
+        sign = int(side[first])
+        segment = sign * dev[first:stop]
+        top = float(segment.max())
+        plateau = np.flatnonzero(segment >= top - 1e-12 * max(1.0, abs(top)))
+        i0, i1 = first + int(plateau[0]), first + int(plateau[-1])
+        peak_time = 0.5 * (t[i0] + t[i1])
+        if i0 == i1 and 0 < i0 < dev.size - 1:
+            peak_time = _parabolic_peak(t, sign * dev, i0)
+        # Closed: the signal left the top by more than the hysteresis before the lobe's end.
+        after = segment[i1 - first :]
+        closed = bool(b < marks.size or (after.size and top - after.min() > h))
+        lobes.append(_Lobe(sign, first, last_marked, i0, float(peak_time), closed))
+    return lobes
+
+
+def _parabolic_peak(t: np.ndarray, y: np.ndarray, i: int) -> float:
+    """Vertex time of the parabola through three samples around a sharp (unquantized) maximum."""
+    t0, t1, t2 = t[i - 1], t[i], t[i + 1]
+    y0, y1, y2 = y[i - 1], y[i], y[i + 1]
+    denom = (t0 - t1) * (t0 - t2) * (t1 - t2)
+    a = (t2 * (y1 - y0) + t1 * (y0 - y2) + t0 * (y2 - y1)) / denom
+    b = (t2**2 * (y0 - y1) + t1**2 * (y2 - y0) + t0**2 * (y1 - y2)) / denom
+    if a >= 0:
+        return float(t1)
+    vertex = -b / (2 * a)
+    return float(vertex) if t0 <= vertex <= t2 else float(t1)
+
+
+def _band_entry(t: np.ndarray, dist: np.ndarray, band: float, j: int) -> float:
+    """Time the distance ``dist`` fell below ``band`` between samples ``j`` (outside) and ``j+1``."""
+    d0, d1 = dist[j], dist[j + 1]
+    if d0 == d1:
+        return float(t[j + 1])
+    frac = min(1.0, max(0.0, (d0 - band) / (d0 - d1)))
+    return float(t[j] + frac * (t[j + 1] - t[j]))
+
+
+def _crossing(t: np.ndarray, dev: np.ndarray, left: _Lobe, right: _Lobe) -> float:
+    """Time ``dev`` crosses zero going from lobe ``left`` to lobe ``right``."""
+    seg = slice(left.peak_index, right.start + 1)
+    y = left.sign * dev[seg]
+    ts = t[seg]
+    # First sample at or past zero after the left lobe's peak.
+    k = int(np.flatnonzero(y <= 0)[0])
+    if y[k] < 0:
+        return float(ts[k - 1] + (ts[k] - ts[k - 1]) * y[k - 1] / (y[k - 1] - y[k]))
+    # The signal rests exactly on the reference for a while: take the middle of that stretch.
+    k_end = k + int(np.argmax(y[k:] < 0))
+    return float(0.5 * (ts[k] + ts[k_end]))
+
+
+def _damped_frequency(t: np.ndarray, dev: np.ndarray, lobes: list[_Lobe]) -> float | None:
+    """Damped frequency from the crossings between successive lobes (or the peak spacing)."""
+    crossings = np.array([_crossing(t, dev, a, b) for a, b in zip(lobes, lobes[1:])])
+    n = crossings.size
+    if n >= 3:
+        k = np.arange(n)
+        design = np.column_stack((np.ones(n), k, (-1.0) ** k))
+        half_period = float(np.linalg.lstsq(design, crossings, rcond=None)[0][1])
+    elif n == 2:
+        half_period = float(crossings[1] - crossings[0])
+    elif n == 1 and lobes[1].closed:
+        half_period = lobes[1].peak_time - lobes[0].peak_time
+    else:
+        return None
+    return math.pi / half_period if half_period > 0 else None
