@@ -1,0 +1,450 @@
+"""The files of a run (SPEC §7): ``run.mat``, ``run.csv``, ``metrics.json``, and a streamed CSV log.
+
+``run.mat`` is a MATLAB 5 file (readable by every MATLAB version since 5 and by Octave): each column
+a column vector of doubles, plus a ``meta`` struct with ``controller``, ``parameters``,
+``calibration``, ``pendulum`` and ``version``. ``run.csv`` has a header line and the same columns at
+full (round-trip) precision. Every file is written to a temporary file in the same folder first and
+moved into place with :func:`os.replace`, so a crash never leaves a half-written file behind.
+
+Examples
+--------
+>>> import tempfile, numpy as np
+>>> n = 5
+>>> cols = {name: np.zeros(n) for name in COLUMNS} | {"t": np.linspace(0, 0.004, n)}
+>>> out = tempfile.mkdtemp()
+>>> paths = write_results(out, cols, {"pendulum": "long"}, {"stable": True})
+>>> sorted(paths)
+['csv', 'mat', 'metrics']
+>>> columns, meta = read_run(out)
+>>> float(columns["t"][-1]), meta["pendulum"]
+(0.004, 'long')
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import math
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+import scipy.io
+
+import pendulab
+from pendulab.errors import UserError
+
+#: The columns of every run file, in this order (SPEC §7).
+COLUMNS = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state")
+#: The fields the ``meta`` struct always has (empty when not given).
+META_FIELDS = ("controller", "parameters", "calibration", "pendulum", "version")
+FILE_NAMES = {"mat": "run.mat", "csv": "run.csv", "metrics": "metrics.json"}
+
+# MATLAB 5 names: a letter, then letters, digits, underscores; at most 31 characters.
+_MATLAB_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
+
+
+# ------------------------------------------------------------------------------------------ write
+def write_results(
+    out_dir: str | os.PathLike[str],
+    columns: Mapping[str, Any],
+    meta: Mapping[str, Any],
+    metrics: Mapping[str, Any],
+) -> dict[str, Path]:
+    """Write ``run.mat``, ``run.csv`` and ``metrics.json`` into ``out_dir`` (created if missing).
+
+    Parameters
+    ----------
+    out_dir : path
+        Output folder.
+    columns : mapping of name -> 1-D array
+        At least every name in :data:`COLUMNS`, all of the same length; further columns (valid
+        MATLAB names) are written after them.
+    meta : mapping
+        ``controller`` (string or mapping), ``parameters`` (mapping or :class:`PlantParameters`),
+        ``calibration`` (mapping or string), ``pendulum`` (string), ``version`` (defaults to the
+        package version), and any other entries. Nested mappings become MATLAB structs, ``None``
+        an empty array.
+    metrics : mapping
+        Written to ``metrics.json`` (indent 2); non-finite numbers become ``null``.
+
+    Returns
+    -------
+    dict
+        ``{"mat": Path, "csv": Path, "metrics": Path}``.
+
+    Raises
+    ------
+    ValueError
+        Missing or malformed columns (a programming error, not a user's).
+    UserError
+        The output folder cannot be created or written.
+    """
+    names, data = _column_table(columns)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"output folder {out} is a file; give a folder name for --out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"cannot create output folder {out}: {exc.strerror or exc}; choose another --out") from None
+
+    mat_meta = _matlab_meta(meta)
+    writers = {
+        "mat": lambda f: scipy.io.savemat(
+            f,
+            {**{n: data[:, [i]] for i, n in enumerate(names)}, "meta": mat_meta},
+            format="5",
+            oned_as="column",
+        ),
+        "csv": lambda f: f.write(_csv_text(names, data).encode()),
+        "metrics": lambda f: f.write((json.dumps(_json_safe(metrics), indent=2, allow_nan=False) + "\n").encode()),
+    }
+    # Write every file to a temporary name first, then move them all into place: a failure half
+    # way leaves the previous run's files (or none), never a mixture or a truncated file.
+    temporaries: dict[str, Path] = {}
+    try:
+        for key, write in writers.items():
+            temporaries[key] = _write_temporary(out, FILE_NAMES[key], write)
+        paths = {}
+        for key, tmp in temporaries.items():
+            paths[key] = out / FILE_NAMES[key]
+            os.replace(tmp, paths[key])
+        return paths
+    except OSError as exc:
+        raise UserError(f"cannot write results to {out}: {exc.strerror or exc}; check the folder's permissions and free space") from None
+    finally:
+        for tmp in temporaries.values():
+            tmp.unlink(missing_ok=True)
+
+
+def atomic_write(path: str | os.PathLike[str], write: Any) -> Path:
+    """Call ``write(binary_file)`` on a temporary file beside ``path``, then move it to ``path``.
+
+    Used for every file pendulab writes (plots and animations too), so that a crash or an error
+    never leaves a truncated file under the final name.
+    """
+    path = Path(path)
+    tmp = _write_temporary(path.parent, path.name, write)
+    try:
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def _write_temporary(folder: Path, name: str, write: Any) -> Path:
+    stem, dot, suffix = name.rpartition(".")
+    # Keep the real suffix last: some writers (Pillow) pick the format from it.
+    fd, tmp_name = tempfile.mkstemp(dir=folder, prefix=f".{stem or name}.", suffix=f".tmp{dot}{suffix}" if dot else ".tmp")
+    tmp = Path(tmp_name)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def _column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
+    missing = [name for name in COLUMNS if name not in columns]
+    if missing:
+        raise ValueError(f"run columns lack {', '.join(missing)}; every run has {', '.join(COLUMNS)}")
+    names = list(COLUMNS) + [name for name in columns if name not in COLUMNS]
+    arrays = []
+    for name in names:
+        if not _MATLAB_NAME.match(name):
+            raise ValueError(f"column name {name!r} is not a MATLAB variable name (letter, then letters/digits/_; max 31)")
+        array = np.asarray(columns[name], dtype=float)
+        if array.ndim == 2 and 1 in array.shape:
+            array = array.reshape(-1)
+        if array.ndim != 1:
+            raise ValueError(f"column {name!r} has shape {array.shape}; give a 1-D array")
+        arrays.append(array)
+    lengths = {a.size for a in arrays}
+    if len(lengths) > 1:
+        detail = ", ".join(f"{n}={a.size}" for n, a in zip(names, arrays))
+        raise ValueError(f"run columns differ in length ({detail})")
+    return names, np.column_stack(arrays) if arrays[0].size else np.zeros((0, len(names)))
+
+
+def _csv_text(names: Sequence[str], data: np.ndarray) -> str:
+    # repr of a Python float is the shortest text that reads back to the same double.
+    lines = [",".join(names)]
+    lines.extend(",".join(map(repr, row)) for row in data.tolist())
+    return "\n".join(lines) + "\n"
+
+
+def _matlab_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
+    merged: dict[str, Any] = {name: None for name in META_FIELDS}
+    merged["version"] = pendulab.__version__
+    merged.update(meta)
+    return _to_matlab(merged)
+
+
+def _to_matlab(value: Any) -> Any:
+    """Python data to what :func:`scipy.io.savemat` writes as the natural MATLAB type."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = dataclasses.asdict(value)
+    if isinstance(value, Mapping):
+        return {_matlab_field(str(k)): _to_matlab(v) for k, v in value.items()}
+    if value is None:
+        return np.zeros((0, 0))
+    if isinstance(value, (str, os.PathLike)):
+        return os.fspath(value)
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, float, complex, np.number)):
+        return value
+    if isinstance(value, np.ndarray) and value.dtype != object:
+        return value if value.ndim != 1 else value.reshape(1, -1)  # vectors in meta are rows
+    if isinstance(value, (list, tuple, np.ndarray)):
+        items = list(value)
+        if items and all(isinstance(v, (int, float, complex, np.number)) and not isinstance(v, bool) for v in items):
+            return np.asarray(items).reshape(1, -1)
+        cell = np.empty((1, len(items)), dtype=object)  # anything else: a cell array
+        for i, v in enumerate(items):
+            cell[0, i] = _to_matlab(v)
+        return cell
+    return str(value)
+
+
+def _matlab_field(name: str) -> str:
+    field = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    if not field or not field[0].isalpha():
+        field = "f_" + field
+    return field[:31]
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if value is None or isinstance(value, str):
+        return value
+    return str(value)
+
+
+# ------------------------------------------------------------------------------------------- read
+def read_run(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read a run back from ``run.mat``, ``run.csv``, or a folder holding either (``run.mat`` first).
+
+    Returns
+    -------
+    columns : dict of name -> 1-D float array
+        Every column in the file (at least :data:`COLUMNS`).
+    meta : dict
+        The ``meta`` struct as nested dicts (``{}`` for a CSV file, which has no meta).
+
+    Raises
+    ------
+    UserError
+        The file is missing, unreadable, or lacks columns.
+    """
+    path = Path(path)
+    if path.is_dir():
+        candidates = [path / FILE_NAMES["mat"], path / FILE_NAMES["csv"]]
+        found = next((p for p in candidates if p.is_file()), None)
+        if found is None:
+            raise UserError(f"no run.mat or run.csv in {path}; give the output folder of a run or the file itself")
+        path = found
+    elif not path.exists():
+        raise UserError(f"run file {path} does not exist; give a run.mat or run.csv (or its folder)")
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        columns, meta = _read_mat(path)
+    elif suffix == ".csv":
+        columns, meta = _read_csv(path), {}
+    else:
+        raise UserError(f"{path} is neither a .mat nor a .csv file; give a run.mat or run.csv")
+    missing = [name for name in COLUMNS if name not in columns]
+    if missing:
+        raise UserError(f"{path} lacks column(s) {', '.join(missing)}; a pendulab run has {', '.join(COLUMNS)}")
+    return columns, meta
+
+
+def _read_mat(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    try:
+        content = scipy.io.loadmat(path, squeeze_me=False, struct_as_record=False)
+    except Exception as exc:  # scipy raises several types for a damaged or foreign file
+        raise UserError(f"cannot read {path} as a MATLAB file ({type(exc).__name__}: {exc}); give a run.mat written by pendulab") from None
+    columns: dict[str, np.ndarray] = {}
+    for name, value in content.items():
+        if name.startswith("__") or name == "meta":
+            continue
+        if isinstance(value, np.ndarray) and value.dtype.kind in "fiub" and value.ndim == 2 and value.shape[1] == 1:
+            columns[name] = value[:, 0].astype(float)
+    meta_raw = content.get("meta")
+    meta = _from_matlab(meta_raw) if meta_raw is not None else {}
+    return columns, meta if isinstance(meta, dict) else {"meta": meta}
+
+
+def _from_matlab(value: Any) -> Any:
+    """Nested ``mat_struct`` / arrays as loaded by scipy, back to plain Python data."""
+    if isinstance(value, scipy.io.matlab.mat_struct):
+        return {name: _from_matlab(getattr(value, name)) for name in value._fieldnames}
+    if isinstance(value, np.ndarray):
+        if value.size == 0:
+            return None
+        if value.dtype.kind == "U":
+            strings = [str(v) for v in value.ravel()]
+            return strings[0] if len(strings) == 1 else strings
+        if value.dtype == object:
+            items = [_from_matlab(v) for v in value.ravel()]
+            return items[0] if len(items) == 1 else items
+        if value.size == 1:
+            return value.ravel()[0].item()
+        return value.ravel().tolist() if 1 in value.shape else value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _read_csv(path: Path) -> dict[str, np.ndarray]:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read {path}: {exc}; give a run.csv written by pendulab") from None
+    lines = text.split("\n")
+    if not text.endswith("\n") and len(lines) > 2:
+        lines = lines[:-1]  # a streamed log cut off mid-line by a crash: drop the partial row
+    lines = [line for line in lines if line.strip()]
+    if not lines:
+        raise UserError(f"{path} is empty; give a run.csv written by pendulab")
+    names = [name.strip() for name in lines[0].split(",")]
+    try:
+        data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2) if len(lines) > 1 else np.zeros((0, len(names)))
+    except ValueError as exc:
+        raise UserError(f"{path} has a malformed row ({exc}); give a run.csv written by pendulab") from None
+    if data.size and data.shape[1] != len(names):
+        raise UserError(f"{path} has {data.shape[1]} values per row but {len(names)} names in its header")
+    return {name: data[:, i].copy() for i, name in enumerate(names)}
+
+
+# ------------------------------------------------------------------------------------ streamed log
+class RunLog:
+    """An incremental CSV writer for logs streamed while a run is going (HIL).
+
+    Rows are kept in memory and written as whole lines every ``flush_every`` rows, so a crash
+    loses at most the rows since the last flush, and the file never holds half a row except for
+    a write interrupted by the crash itself (which :func:`read_run` drops).
+
+    Parameters
+    ----------
+    path : path
+        The CSV file (its folder is created; an existing file is replaced).
+    columns : sequence of str
+        Column names, in order (default :data:`COLUMNS`).
+    flush_every : int
+        Rows between writes to the operating system.
+    fsync : bool
+        Also ask the OS to put each flush on disk (survives a power cut, costs time).
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> path = os.path.join(tempfile.mkdtemp(), "log.csv")
+    >>> with RunLog(path, ("t", "V"), flush_every=2) as log:
+    ...     log.append((0.0, 1.5))
+    ...     log.append({"t": 0.001, "V": -2.0})
+    >>> open(path).read()
+    't,V\\n0.0,1.5\\n0.001,-2.0\\n'
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        columns: Sequence[str] = COLUMNS,
+        *,
+        flush_every: int = 100,
+        fsync: bool = False,
+    ) -> None:
+        self.columns = tuple(columns)
+        bad = [c for c in self.columns if not _MATLAB_NAME.match(c)]
+        if not self.columns or bad:
+            raise ValueError(f"log columns must be MATLAB-style names; bad: {bad or 'no columns'}")
+        if flush_every < 1:
+            raise ValueError(f"flush_every={flush_every} must be >= 1")
+        self.path = Path(path)
+        self.flush_every = int(flush_every)
+        self.fsync = fsync
+        self.rows = 0
+        self._pending: list[str] = []
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file: io.TextIOWrapper | None = open(self.path, "w", encoding="ascii", newline="\n")
+        except OSError as exc:
+            raise UserError(f"cannot open log file {self.path}: {exc.strerror or exc}; choose another folder") from None
+        self._file.write(",".join(self.columns) + "\n")
+        self._file.flush()
+
+    def append(self, row: Sequence[float] | Mapping[str, float]) -> None:
+        """Add one row: values in column order, or a mapping by column name."""
+        if self._file is None:
+            raise ValueError(f"log {self.path} is closed")
+        if isinstance(row, Mapping):
+            try:
+                values: Iterable[Any] = [row[c] for c in self.columns]
+            except KeyError as exc:
+                raise ValueError(f"log row lacks column {exc.args[0]!r}") from None
+        else:
+            values = list(row)
+            if len(values) != len(self.columns):
+                raise ValueError(f"log row has {len(values)} values for {len(self.columns)} columns")
+        self._pending.append(",".join(repr(float(v)) for v in values))
+        self.rows += 1
+        if len(self._pending) >= self.flush_every:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the pending rows to the file now."""
+        if self._file is None:
+            return
+        if self._pending:
+            self._file.write("\n".join(self._pending) + "\n")
+            self._pending.clear()
+        self._file.flush()
+        if self.fsync:
+            os.fsync(self._file.fileno())
+
+    def close(self) -> Path:
+        """Flush and close (idempotent); returns the file's path."""
+        if self._file is not None:
+            try:
+                self.flush()
+            finally:
+                self._file.close()
+                self._file = None
+        return self.path
+
+    @property
+    def closed(self) -> bool:
+        return self._file is None
+
+    def __enter__(self) -> "RunLog":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # a forgotten log still keeps its rows
+        try:
+            self.close()
+        except Exception:
+            pass
