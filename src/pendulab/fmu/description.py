@@ -209,6 +209,7 @@ def variables_header(spec: ModelSpec) -> str:
         "#ifndef PENDULAB_VARIABLES_H",
         "#define PENDULAB_VARIABLES_H",
         f"#define MODEL_IDENTIFIER {spec.identifier}",
+        f'#define MODEL_NAME "{spec.identifier}"',
         f'#define MODEL_GUID "{spec.guid}"',
         f"#define N_STATES {len(spec.states)}",
     ]

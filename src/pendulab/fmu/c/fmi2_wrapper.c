@@ -73,7 +73,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     if (fmuType == fmi2ModelExchange) {
         if (functions->logger)
             functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
-                              "%s supports Co-Simulation only", MODEL_IDENTIFIER);
+                              "%s supports Co-Simulation only", MODEL_NAME);
         return NULL;
     }
 #endif

@@ -1,0 +1,41 @@
+"""Controller FMU: a generic discrete LTI block whose matrices are parameters.
+
+A new controller is a new set of parameter values, never a new binary: the student's G(s) is
+discretized in Python (:mod:`pendulab.control.realization`) and its matrices set as start values.
+The block forms the error itself, ``e = r - Lp * alpha_measured``, and outputs ``V_command = C x + D e``;
+each step ``x <- A x + B e``.
+"""
+
+from __future__ import annotations
+
+from pendulab.fmu.description import ModelSpec, Variable
+
+#: Largest controller order the FMU holds.
+MAX_ORDER = 16
+
+
+def spec() -> ModelSpec:
+    n = MAX_ORDER
+    variables = [
+        Variable("alpha_measured", "Real", "input", start=0.0, unit="rad", description="Measured pendulum angle from upright"),
+        Variable("r", "Real", "input", start=0.0, unit="m", description="Tip position reference (0 in the lab)"),
+        Variable("V_command", "Real", "output", unit="V", description="Voltage command, C x + D e", initial="calculated"),
+        Variable("e", "Real", "output", unit="m", description="Tip position error r - Lp*alpha_measured", initial="calculated"),
+        Variable("Lp", "Real", "parameter", start=0.6413, unit="m", description="Pendulum length: the tip position is Lp*alpha", initial="exact"),
+        Variable("h", "Real", "parameter", start=1e-3, unit="s", description="Sample period the matrices were discretized for", initial="exact"),
+        Variable("D", "Real", "parameter", start=0.0, unit="V/m", description="Feedthrough", initial="exact"),
+    ]
+    variables += [
+        Variable(f"A[{i},{j}]", "Real", "parameter", start=0.0, description=f"State matrix entry ({i},{j})", initial="exact")
+        for i in range(1, n + 1)
+        for j in range(1, n + 1)
+    ]
+    variables += [Variable(f"B[{i}]", "Real", "parameter", start=0.0, description=f"Input matrix entry {i}", initial="exact") for i in range(1, n + 1)]
+    variables += [Variable(f"C[{i}]", "Real", "parameter", start=0.0, unit="V", description=f"Output matrix entry {i}", initial="exact") for i in range(1, n + 1)]
+    variables.append(Variable("n", "Integer", "parameter", start=0, description=f"Controller order (0..{n})", initial="exact"))
+    return ModelSpec(
+        identifier="Controller",
+        description="Student controller: discrete linear time-invariant block x+ = A x + B e, V = C x + D e, e = r - Lp*alpha",
+        variables=variables,
+        defines={"MAX_ORDER": str(n)},
+    )
