@@ -1,0 +1,1 @@
+"""Supervisor FMU: the lab control logic (SPEC §5). See :mod:`.config` for its variables and codes."""

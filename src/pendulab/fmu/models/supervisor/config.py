@@ -1,0 +1,138 @@
+"""Supervisor FMU: the lab control logic of SPEC §5 (Co-Simulation only).
+
+The supervisor sits between the controller and the plant (or the rig) and owns the motor enable. Its
+state machine lives in ``model.c``; this module holds its variable table and the codes a master needs
+to drive it and to read its outputs. The C code gets the same codes and names through ``#define``
+lines generated from the tables below, so the two can never disagree.
+
+States (output ``state``)::
+
+    idle --start--> running            (rig mode: --> waiting for capture --|alpha| < capture_window--> running)
+    running --pause--> paused --start--> running (rig mode: through the capture window again)
+    running --limit crossed / non-finite input--> tripped (latched, V = 0)
+    tripped --rearm (limits OK)--> idle;  tripped --start (limits OK)--> running (re-armed and started)
+    any --end--> ended (final)
+
+Examples
+--------
+>>> from pendulab.fmu.models.supervisor.config import COMMANDS, STATES, TRIP_REASONS
+>>> STATES[2], TRIP_REASONS[1], COMMANDS["start"]
+('running', 'angle limit', 1)
+>>> spec().identifier
+'Supervisor'
+"""
+
+from __future__ import annotations
+
+import math
+
+from pendulab.fmu.description import ModelSpec, Variable
+
+# ---------------------------------------------------------------- codes shared with model.c
+IDLE, WAITING, RUNNING, PAUSED, TRIPPED, ENDED = range(6)
+#: ``state`` output code -> name.
+STATES: dict[int, str] = {
+    IDLE: "idle",
+    WAITING: "waiting for capture",
+    RUNNING: "running",
+    PAUSED: "paused",
+    TRIPPED: "tripped",
+    ENDED: "ended",
+}
+
+NO_TRIP, TRIP_ANGLE, TRIP_TRACK, TRIP_VOLTAGE, TRIP_MEASUREMENT = range(5)
+#: ``trip_reason`` output code -> name.
+TRIP_REASONS: dict[int, str] = {
+    NO_TRIP: "none",
+    TRIP_ANGLE: "angle limit",
+    TRIP_TRACK: "track limit",
+    TRIP_VOLTAGE: "non-finite voltage command",
+    TRIP_MEASUREMENT: "non-finite measurement",
+}
+
+#: Operator command name -> ``command`` input code. The master sets a code for one step, then 0;
+#: the supervisor acts when the input changes to a non-zero code (so a held code acts once).
+COMMANDS: dict[str, int] = {"none": 0, "start": 1, "pause": 2, "end": 3, "rearm": 4}
+
+#: The lab keys (SPEC §9) -> command names; "r" re-arms after a trip.
+KEYS: dict[str, str] = {"s": "start", "p": "pause", "e": "end", "r": "rearm"}
+
+# ---------------------------------------------------------------- parameter defaults and limits
+ALPHA_MAX_RANGE_DEG = (10.0, 15.0)
+ALPHA_MAX_DEFAULT = math.radians(15.0)
+X_MAX_DEFAULT = 0.40
+CAPTURE_WINDOW_DEFAULT = math.radians(2.0)
+CENTRE_TOLERANCE_DEFAULT = 0.01
+V_LIMIT_DEFAULT = 10.0
+#: Slack (rad) on the alpha_max range so that a rounded 15 deg (0.2618 rad) is accepted.
+ALPHA_MAX_SLACK = 1e-6
+
+
+def _codes(table: dict[int, str]) -> str:
+    return ", ".join(f"{code} {name}" for code, name in table.items())
+
+
+def _c_names(table: dict[int, str]) -> str:
+    return "((const char *[]){" + ", ".join(f'"{table[k]}"' for k in sorted(table)) + "})"
+
+
+def spec() -> ModelSpec:
+    """The Supervisor's variable table (value references follow the table order per base type)."""
+    commands = ", ".join(f"{code} {name}" for name, code in COMMANDS.items())
+    lo, hi = ALPHA_MAX_RANGE_DEG
+    variables = [
+        # Real
+        Variable("V_command", "Real", "input", start=0.0, unit="V", description="Voltage command from the controller"),
+        Variable("alpha_measured", "Real", "input", start=0.0, unit="rad",
+                 description="Measured pendulum angle: from upright (simulation), or the rig encoder's theta, 0 hanging down (rig_mode)"),
+        Variable("x_measured", "Real", "input", start=0.0, unit="m", description="Measured cart position (0 at track centre)"),
+        Variable("V", "Real", "output", unit="V",
+                 description="Gated voltage to the amplifier: V_command clamped to +-V_limit while running, else 0"),
+        Variable("trip_time", "Real", "output", variability="discrete", unit="s",
+                 description="Communication point at which the latched trip was seen (-1: no trip)"),
+        Variable("alpha", "Real", "output", unit="rad",
+                 description="Pendulum angle from upright in (-pi, pi], as the supervisor checks it"),
+        Variable("alpha_max", "Real", "parameter", start=ALPHA_MAX_DEFAULT, unit="rad", initial="exact",
+                 description=f"Angle limit |alpha| (must be {lo:g} to {hi:g} deg; not checked in calibration_mode)"),
+        Variable("x_max", "Real", "parameter", start=X_MAX_DEFAULT, unit="m", initial="exact",
+                 description="Track limit |x_measured|"),
+        Variable("capture_window", "Real", "parameter", start=CAPTURE_WINDOW_DEFAULT, unit="rad", initial="exact",
+                 description="rig_mode: the controller is engaged once |alpha| is below this (0 < capture_window <= alpha_max)"),
+        Variable("centre_tolerance", "Real", "parameter", start=CENTRE_TOLERANCE_DEFAULT, unit="m", initial="exact",
+                 description="calibration_mode: start is accepted only while |x_measured| is below this"),
+        Variable("V_limit", "Real", "parameter", start=V_LIMIT_DEFAULT, unit="V", initial="exact",
+                 description="Clamp of the gated voltage V"),
+        # Integer
+        Variable("command", "Integer", "input", start=0,
+                 description=f"Operator command ({commands}); acted on when it changes to a non-zero code"),
+        Variable("iteration", "Integer", "input", start=0,
+                 description="Current calibration iteration, announced when it changes (set by the calibration master)"),
+        Variable("state", "Integer", "output", description=f"Supervisor state: {_codes(STATES)}"),
+        Variable("trip_reason", "Integer", "output", description=f"Reason of the latched trip: {_codes(TRIP_REASONS)}"),
+        # Boolean
+        Variable("rig_mode", "Boolean", "parameter", start=False, initial="exact",
+                 description="alpha_measured is the rig encoder's theta (0 hanging down): convert to alpha = wrap(theta - pi) and engage only inside the capture window"),
+        Variable("auto_start", "Boolean", "parameter", start=True, initial="exact",
+                 description="Start at initialization (simulation); false: wait for the start command (lab)"),
+        Variable("calibration_mode", "Boolean", "parameter", start=False, initial="exact",
+                 description="Pendulum removed: no angle limit, no capture window, start only with the cart centred"),
+        Variable("motor_enable", "Boolean", "output", description="Amplifier enable: true only while running"),
+    ]
+    defines = {
+        **{f"STATE_{name.split()[0].upper()}": str(code) for code, name in STATES.items()},
+        **{f"TRIP_{key}": str(code) for key, code in zip(("NONE", "ANGLE", "TRACK", "VOLTAGE", "MEASUREMENT"), TRIP_REASONS)},
+        **{f"CMD_{name.upper()}": str(code) for name, code in COMMANDS.items()},
+        "N_STATE_CODES": str(len(STATES)),
+        "STATE_NAMES": _c_names(STATES),
+        "TRIP_NAMES": _c_names(TRIP_REASONS),
+        "ALPHA_MAX_MIN_DEG": repr(lo),
+        "ALPHA_MAX_MAX_DEG": repr(hi),
+        "ALPHA_MAX_SLACK": repr(ALPHA_MAX_SLACK),
+    }
+    return ModelSpec(
+        identifier="Supervisor",
+        description="Lab supervisor: angle and track limits with latched trips, start / pause / end / re-arm, "
+        "upright capture for the rig, calibration mode; gates the voltage and owns the motor enable",
+        variables=variables,
+        defines=defines,
+    )
