@@ -136,7 +136,8 @@ class Master:
     Use as a context manager so the FMU instances and their unpacked folders are freed.
     """
 
-    def __init__(self, system: System):
+    def __init__(self, system: System, *, native: bool = True):
+        self.native = native
         if not system.components:
             raise UserError("the system has no components")
         self.system = system
@@ -179,6 +180,47 @@ class Master:
                 raise SimulationError(f"{name}: initialization failed ({exc}); check its start values") from exc
 
     # ------------------------------------------------------------------ the loop
+    def _apply_events(self, pending: list[Event], t: float, reset_after_step: list) -> None:
+        for inst, name, value in reset_after_step:
+            inst.set_value(name, value)
+        reset_after_step.clear()
+        while pending and pending[0].time <= t + 1e-12:
+            event = pending.pop(0)
+            comp, _, var = event.target.partition(".")
+            inst = self.instances[comp]
+            inst.set_value(var, event.value)
+            start = inst.variable(var).start
+            reset_after_step.append((inst, var, start if start is not None else 0))
+
+    def _run_native(self, runner: Any, plan: "_Plan", time: np.ndarray, n_steps: int, h: float,
+                    pending: list[Event], stop_when: Any, progress: Any) -> dict[str, np.ndarray]:
+        """The same plan, run by the compiled runner between the points where Python must act."""
+        ops, names = plan.native_ops()
+        reset_after_step: list = []
+        k = 0
+        t0 = float(time[0])
+        while k <= n_steps:
+            if reset_after_step or (pending and pending[0].time <= time[k] + 1e-12):
+                self._apply_events(pending, time[k], reset_after_step)
+            # Run up to the next point where an event, a reset, a stop check or progress is due.
+            end = n_steps + 1
+            if reset_after_step:
+                end = k + 1
+            elif pending:
+                end = min(end, max(k + 1, int(np.searchsorted(time, pending[0].time - 1e-12))))
+            if stop_when is not None or progress is not None:
+                end = min(end, (k // 100 + 1) * 100)
+            failed = runner(ops, len(ops), k, end, n_steps, t0, h)
+            if failed >= 0:
+                raise SimulationError(f"{names[failed]} failed near t={time[min(end, n_steps)]:.4f} s (the FMU's log has the reason)")
+            k = end
+            if k <= n_steps and k % 100 == 0:
+                if stop_when is not None and stop_when(plan.row(k - 1)):
+                    return {"time": time[:k], **plan.columns(k)}
+                if progress is not None and k % 1000 == 0:
+                    progress(float(time[k - 1]) + h)
+        return {"time": time, **plan.columns(n_steps + 1)}
+
     def run(
         self,
         stop_time: float,
@@ -223,19 +265,13 @@ class Master:
         reset_after_step: list[tuple[_Instance, str, Any]] = []
         phase_a, late, recorders, steps = plan.phase_a, plan.late, plan.recorders, plan.steps
 
+        runner = _native_runner() if self.native else None
+        if runner is not None:
+            return self._run_native(runner, plan, time, n_steps, h, pending, stop_when, progress)
         for k in range(n_steps + 1):
             t = time[k]
             if reset_after_step or (pending and pending[0].time <= t + 1e-12):
-                for inst, name, value in reset_after_step:
-                    inst.set_value(name, value)
-                reset_after_step.clear()
-                while pending and pending[0].time <= t + 1e-12:
-                    event = pending.pop(0)
-                    comp, _, var = event.target.partition(".")
-                    inst = self.instances[comp]
-                    inst.set_value(var, event.value)
-                    start = inst.variable(var).start
-                    reset_after_step.append((inst, var, start if start is not None else 0))
+                self._apply_events(pending, t, reset_after_step)
             # Components in order: inputs from the outputs already known at this point, then outputs.
             for copies, sets, gets in phase_a:
                 for src, offset, dst, di in copies:
@@ -264,6 +300,42 @@ class Master:
         return {"time": time, **plan.columns(n_steps + 1)}
 
 
+class _Op(ctypes.Structure):
+    """One operation of the native plan runner (see cosim/c/plan_runner.c)."""
+
+    _fields_ = [
+        ("kind", ctypes.c_int32),
+        ("pad", ctypes.c_int32),
+        ("fn", ctypes.c_void_p),
+        ("handle", ctypes.c_void_p),
+        ("vrs", ctypes.c_void_p),
+        ("n", ctypes.c_size_t),
+        ("base", ctypes.c_void_p),
+        ("row", ctypes.c_ssize_t),
+        ("target", ctypes.c_void_p),
+    ]
+
+
+_OP_ACCESS, _OP_COPY_F64, _OP_COPY_I32, _OP_BARRIER, _OP_STEP = range(5)
+_RUNNER: list[Any] = []
+
+
+def _native_runner() -> Any | None:
+    """The compiled plan runner, built on first use; None where no C compiler is available."""
+    if not _RUNNER:
+        from pendulab.fmu.build import build_helper_library
+
+        try:
+            lib = ctypes.CDLL(str(build_helper_library(Path(__file__).parent / "c" / "plan_runner.c")))
+            f = lib.pendulab_run_plan
+            f.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_double, ctypes.c_double]
+            f.restype = ctypes.c_long
+            _RUNNER.append(f)
+        except Exception:  # noqa: BLE001 - no compiler: the Python loop runs the same plan
+            _RUNNER.append(None)
+    return _RUNNER[0]
+
+
 _GET = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
 _STEP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
 _NUMPY = {"Real": np.float64, "Integer": np.int32, "Boolean": np.int32}
@@ -281,6 +353,7 @@ class _Plan:
         order = list(master.instances)
         position = {name: k for k, name in enumerate(order)}
         self._keep: list[Any] = []  # ctypes objects whose addresses the plan uses
+        self._labels: dict[int, str] = {}
         self._logs: dict[tuple[str, str], tuple[np.ndarray, list[str]]] = {}
         self._record = list(record)
 
@@ -310,6 +383,7 @@ class _Plan:
                 self._keep += [vrs, flat[(name, t)]]
                 f = _GET((f"fmi2Get{t}".encode(), inst.fmu.dll))
                 self._keep.append(f)
+                self._labels[id(f)] = f"{name}: fmi2Get{t}"
                 gets.append((f, inst.handle, ctypes.addressof(vrs), len(names), log.ctypes.data, log.strides[0]))
             gets_of[name] = gets
 
@@ -329,6 +403,7 @@ class _Plan:
                 vrs = (ctypes.c_uint * len(names))(*(inst.variable(v).valueReference for v in names))
                 f = _GET((f"fmi2Set{t}".encode(), inst.fmu.dll))
                 self._keep += [buf, vrs, f]
+                self._labels[id(f)] = f"{name}: fmi2Set{t}"
                 inputs[(name, t)] = (buf, names)
                 call = (f, inst.handle, ctypes.addressof(vrs), len(names), ctypes.addressof(buf))
                 is_late = any(position[c.source] >= position[name] for c in system.connections if c.target == name)
@@ -353,6 +428,47 @@ class _Plan:
             f = _STEP((b"fmi2DoStep", master.instances[name].fmu.dll))
             self._keep.append(f)
             self.steps.append((name, f, master.instances[name].handle))
+
+    def native_ops(self) -> tuple[Any, list[str]]:
+        """The plan as an array of :class:`_Op` (and a label per operation for error messages)."""
+        ops: list[_Op] = []
+        labels: list[str] = []
+
+        def address(fn: Any) -> int:
+            return ctypes.cast(fn, ctypes.c_void_p).value or 0
+
+        def copies(items: list) -> None:
+            for src, (m, si), dst, di in items:
+                size = ctypes.sizeof(src._type_)
+                kind = _OP_COPY_F64 if src._type_ is ctypes.c_double else _OP_COPY_I32
+                ops.append(_Op(kind, 0, None, None, None, 0, ctypes.addressof(src) + si * size, m * size, ctypes.addressof(dst) + di * size))
+                labels.append("copy")
+
+        def calls(items: list, fixed: bool) -> None:
+            for item in items:
+                if fixed:
+                    f, handle, vrs, n, buf = item
+                    base, row = buf, 0
+                else:
+                    f, handle, vrs, n, base, row = item
+                ops.append(_Op(_OP_ACCESS, 0, address(f), handle, vrs, n, base, row, None))
+                labels.append(self._labels.get(id(f), "fmi2Get/Set"))
+
+        for conn, sets, gets in self.phase_a:
+            copies(conn)
+            calls(sets, True)
+            calls(gets, False)
+        copies(self.late[0])
+        calls(self.late[1], True)
+        calls(self.recorders, False)
+        ops.append(_Op(_OP_BARRIER, 0, None, None, None, 0, None, 0, None))
+        labels.append("barrier")
+        for name, f, handle in self.steps:
+            ops.append(_Op(_OP_STEP, 0, address(f), handle, None, 0, None, 0, None))
+            labels.append(f"{name}: fmi2DoStep")
+        array = (_Op * len(ops))(*ops)
+        self._keep.append(array)
+        return array, labels
 
     def _lookup(self, path: str) -> tuple[np.ndarray, int]:
         comp, _, var = path.partition(".")

@@ -69,7 +69,7 @@ def _platform_dir() -> str:
 
 
 def _compile(compiler: str, sources: list[Path], include_dirs: list[Path], output: Path, windows: bool) -> None:
-    flags = ["-shared", "-O2", "-std=c99", "-fno-math-errno", "-fvisibility=hidden"]
+    flags = ["-shared", "-O2", "-std=c99", "-fno-math-errno"]
     if not windows:
         flags.append("-fPIC")
     else:
@@ -134,6 +134,25 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
                     zf.write(path, path.relative_to(root).as_posix())
             zf.comment = (_STAMP + source_hash()).encode()
         target = out_dir / f"{name}.fmu"
+        os.replace(partial, target)
+    return target
+
+
+def build_helper_library(source: Path) -> Path:
+    """Compile a small C helper of pendulab's own (not an FMU) into the cache, once per source version."""
+    text = source.read_bytes()
+    digest = hashlib.sha256(text).hexdigest()[:12]
+    suffix = {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}[platform.system()]
+    out_dir = default_fmu_dir() / ".helpers"
+    target = out_dir / f"{source.stem}-{digest}{suffix}"
+    if not target.exists():
+        compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+        if not compiler:
+            raise FmuBuildError("no C compiler found")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        fd, partial = tempfile.mkstemp(dir=out_dir, suffix=suffix)
+        os.close(fd)
+        _compile(compiler, [source], [], Path(partial), windows=platform.system() == "Windows")
         os.replace(partial, target)
     return target
 

@@ -1,0 +1,210 @@
+"""``pendulab simulate``: enter a controller, simulate a poke, write the results."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from pendulab.cli.options import add_plant_options, plant_parameters_from_args
+from pendulab.errors import UserError
+
+POKE_DEFAULT = (50.0, 0.005, 1.0)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "simulate",
+        help="simulate a poke of the pendulum with your controller",
+        description=(
+            "Simulate the lab: plant, controller and supervisor FMUs in co-simulation, poke the pendulum, and write "
+            "run.mat, run.csv and metrics.json. With no controller given on a terminal, asks for one."
+        ),
+        epilog=(
+            "examples:\n"
+            "  pendulab simulate --demo\n"
+            "  pendulab simulate --zeros=-3,-6 --poles=-30,-0.1 --gain 80 --plot\n"
+            "  pendulab simulate --controller my_controller.toml --pendulum short --animate\n"
+            "  pendulab simulate --pid 40,5,4 --poke 220,0.005,1"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    given = parser.add_argument_group("controller (kernel G1 and compensators G2..G6)")
+    given.add_argument("--zeros", metavar="LIST", help="kernel zeros, e.g. '-3,-6' or '-2+1j,-2-1j' ('' for none)")
+    given.add_argument("--poles", metavar="LIST", help="kernel poles, e.g. '-30,-0.1'")
+    given.add_argument("--gain", metavar="K", help="kernel gain")
+    given.add_argument("--compensator", action="append", default=[], metavar="ZEROS;POLES[;GAIN]",
+                       help="add a compensator (repeatable), e.g. '-2;-20'")
+    given.add_argument("--pid", metavar="KP,KI,KD", help="PID controller Kp + Ki/(s+1/Ti) + Kd*wf*s/(s+wf)")
+    given.add_argument("--controller", metavar="FILE", help="controller file (TOML or JSON)")
+    given.add_argument("--demo", action="store_true", help="a good default controller for the chosen pendulum")
+    add_plant_options(parser)
+    parser.add_argument("--poke", metavar="MAG,DUR,START", help="poke magnitude (rad/s^2), duration (s), start (s); default 50,0.005,1")
+    parser.add_argument("--stop-time", type=float, default=5.0, metavar="T", help="simulated time in s (default 5)")
+    parser.add_argument("--step", type=float, default=1e-3, metavar="H", help="control period in s (default 0.001)")
+    parser.add_argument("--method", choices=("tustin", "zoh"), default="tustin", help="discretization (default tustin)")
+    parser.add_argument("--no-quantization", action="store_true", help="ideal encoders (no quantization)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: a new folder under runs/)")
+    parser.add_argument("--plot", action="store_true", help="also write PNG plots")
+    parser.add_argument("--animate", action="store_true", help="also write an animation (GIF) of the rig")
+    parser.add_argument("--ssp", action="store_true", help="also write the loop as an SSP file (loop.ssp)")
+    parser.set_defaults(func=run)
+
+
+def parse_poke(text: str) -> tuple[float, float, float]:
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1") from None
+    if len(values) != 3:
+        raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1")
+    magnitude, duration, start = values
+    if not all(math.isfinite(v) for v in values) or duration < 0 or start < 0:
+        raise UserError(f"--poke {text!r}: the magnitude must be finite and the duration and start >= 0")
+    return magnitude, duration, start
+
+
+def controller_from_args(args: argparse.Namespace) -> Any | None:
+    """The controller the flags describe, or None when none was given."""
+    from pendulab.control import controller as ctl
+
+    sources = [
+        name
+        for name, present in (
+            ("--zeros/--poles/--gain", args.zeros is not None or args.poles is not None or args.gain is not None),
+            ("--pid", args.pid is not None),
+            ("--controller", args.controller is not None),
+            ("--demo", args.demo),
+        )
+        if present
+    ]
+    if len(sources) > 1:
+        raise UserError(f"give one controller, not {' and '.join(sources)}")
+    if args.compensator and not (args.zeros is not None or args.poles is not None or args.gain is not None or args.controller or args.demo):
+        raise UserError("--compensator needs a kernel: give --zeros, --poles and --gain (or --controller FILE)")
+    if args.demo:
+        base = ctl.demo_controller(args.pendulum)
+    elif args.controller:
+        base = ctl.load_controller_file(args.controller)
+    elif args.pid is not None:
+        parts = args.pid.split(",")
+        try:
+            kp, ki, kd = (float(p) for p in parts)
+        except ValueError:
+            raise UserError(f"--pid {args.pid!r} must be three numbers KP,KI,KD, e.g. --pid 40,5,4") from None
+        return ctl.Controller.pid(kp, ki, kd)
+    elif args.zeros is not None or args.poles is not None or args.gain is not None:
+        if args.gain is None:
+            raise UserError("the kernel needs a gain: add --gain K")
+        try:
+            gain = float(args.gain)
+        except ValueError:
+            raise UserError(f"--gain {args.gain!r} is not a number; give e.g. --gain 80") from None
+        base = ctl.Controller([ctl.Factor(ctl.parse_numbers(args.zeros or ""), ctl.parse_numbers(args.poles or ""), gain)])
+    else:
+        return None
+    if args.compensator:
+        base = ctl.Controller([*base.factors, *(ctl.parse_compensator(c) for c in args.compensator)])
+    return base
+
+
+def run(args: argparse.Namespace) -> int:
+    started = time.perf_counter()
+    if not (args.stop_time > 0 and math.isfinite(args.stop_time)):
+        raise UserError(f"--stop-time {args.stop_time} must be a positive number of seconds")
+    if not (0 < args.step <= 0.1):
+        raise UserError(f"--step {args.step} must be within (0, 0.1] s; the lab runs at 0.001")
+    poke = parse_poke(args.poke) if args.poke else None
+    controller = controller_from_args(args)
+    if controller is None:
+        if not sys.stdin.isatty():
+            raise UserError("no controller given: use --demo, --zeros/--poles/--gain, --pid or --controller FILE (or run on a terminal to be asked)")
+        from pendulab.control.prompt import run_prompt
+
+        answers = run_prompt()
+        controller = answers.controller
+        args.pendulum = answers.pendulum
+        args.calibration = answers.calibration or args.calibration
+        poke = poke or answers.poke
+    params = plant_parameters_from_args(args)
+    poke = poke or POKE_DEFAULT
+    params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
+    if args.no_quantization:
+        params = params.with_values(q_alpha=0.0, q_x=0.0)
+    out_dir = args.out or _new_run_dir(args.pendulum)
+
+    from pendulab.analysis.results import write_results
+    from pendulab.cosim.pendulum import simulate_poke
+
+    def progress(t: float) -> None:
+        if sys.stderr.isatty():
+            print(f"\r  simulated {t:5.1f} / {args.stop_time:g} s", end="", file=sys.stderr, flush=True)
+
+    result = simulate_poke(
+        controller,
+        params,
+        stop_time=args.stop_time,
+        step=args.step,
+        method=args.method,
+        meta={"pendulum": args.pendulum, "cart": args.cart, "calibration": args.calibration or "default"},
+        progress=progress,
+    )
+    if sys.stderr.isatty():
+        print("\r" + " " * 40 + "\r", end="", file=sys.stderr)
+    paths = write_results(out_dir, result.columns, result.meta, result.metrics)
+    written = [Path(p) for p in (paths.values() if isinstance(paths, dict) else paths)]
+    if args.plot:
+        from pendulab.analysis.plots import plot_run
+
+        written += plot_run(result.columns, out_dir, title=f"{args.pendulum} pendulum: {result.meta['controller']}", poke_start=params.poke_start)
+    if args.animate:
+        from pendulab.analysis.animation import animate_run
+
+        written.append(animate_run(result.columns, out_dir / "rig.gif", Lp=params.Lp, poke_start=params.poke_start) or out_dir / "rig.gif")
+    if args.ssp:
+        from pendulab.control.realization import discretize
+        from pendulab.cosim.pendulum import pendulum_system
+        from pendulab.cosim.ssp import export_ssp
+
+        system = pendulum_system(params, discretize(controller, h=args.step, method=args.method).to_parameters(), step=args.step)
+        written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=args.stop_time))
+    _print_summary(result, out_dir, written, time.perf_counter() - started)
+    return 0
+
+
+def _new_run_dir(pendulum: str) -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    base = Path("runs") / f"{stamp}-{pendulum}"
+    path, k = base, 1
+    while path.exists():
+        k += 1
+        path = Path(f"{base}-{k}")
+    return path
+
+
+def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
+    if value is None:
+        return "n/a"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return f"{value:.{digits}g}{unit}"
+
+
+def _print_summary(result: Any, out_dir: Path, written: list[Path], elapsed: float) -> None:
+    m = result.metrics
+    verdict = "STABLE: the pendulum stayed up" if m.get("stable") else "NOT STABLE"
+    if m.get("safety_cut_time_s") is not None:
+        verdict += f" (safety cut at t = {m['safety_cut_time_s']:.3f} s)"
+    print(verdict)
+    print(f"  controller          {result.meta['controller']}")
+    print(f"  natural frequency   {_fmt(m.get('natural_frequency_rad_s'), ' rad/s')}")
+    print(f"  peak time           {_fmt(m.get('peak_time_s'), ' s')}")
+    print(f"  overshoot           {_fmt(m.get('overshoot_percent'), ' %')}")
+    print(f"  settling time       {_fmt(m.get('settling_time_s'), ' s')}")
+    print(f"  final angle         {_fmt(m.get('final_value_rad'), ' rad')}")
+    print(f"  cart speed change   {_fmt(m.get('cart_speed_change_m_s'), ' m/s')}")
+    print(f"results in {out_dir}/ ({', '.join(p.name for p in written)}) after {elapsed:.1f} s")
