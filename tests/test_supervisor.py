@@ -35,6 +35,7 @@ from pendulab.fmu.models.supervisor.config import (
     TRIPPED,
     WAITING,
     X_MAX_DEFAULT,
+    rig_to_upright,
 )
 
 H = 1e-3  # control period
@@ -400,6 +401,7 @@ def test_rig_angle_is_wrapped_into_minus_pi_pi(make, theta, alpha):
     got = s.tick(alpha_measured=theta)["alpha"]
     assert -math.pi < got <= math.pi
     assert got == pytest.approx(alpha, abs=1e-12)
+    assert rig_to_upright(theta) == pytest.approx(got, abs=1e-15)  # the Python helper agrees with the FMU
 
 
 def test_rig_capture_from_either_side_of_the_wrap(make):

@@ -68,6 +68,25 @@ V_LIMIT_DEFAULT = 10.0
 ALPHA_MAX_SLACK = 1e-6
 
 
+def rig_to_upright(theta: float) -> float:
+    """The rig encoder's angle (0 hanging down) in the upright convention, wrapped into (-pi, pi].
+
+    The same conversion as the FMU's in rig_mode (``alpha = wrap(theta - pi)``), for a master that
+    needs the upright angle outside the supervisor (e.g. to feed the controller on the rig).
+
+    Examples
+    --------
+    >>> rig_to_upright(math.pi), rig_to_upright(0.0) == math.pi
+    (0.0, True)
+    """
+    a = math.fmod(theta - math.pi, 2 * math.pi)
+    if a <= -math.pi:
+        a += 2 * math.pi
+    elif a > math.pi:
+        a -= 2 * math.pi
+    return a
+
+
 def _codes(table: dict[int, str]) -> str:
     return ", ".join(f"{code} {name}" for code, name in table.items())
 
