@@ -28,7 +28,7 @@ import json
 import math
 import os
 import re
-import tempfile
+import secrets
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -137,11 +137,25 @@ def atomic_write(path: str | os.PathLike[str], write: Any) -> Path:
     return path
 
 
-def _write_temporary(folder: Path, name: str, write: Any) -> Path:
+def create_temporary(folder: str | os.PathLike[str], name: str) -> tuple[int, Path]:
+    """Create a new hidden temporary file for ``name`` in ``folder``; returns ``(fd, path)``.
+
+    Unlike :func:`tempfile.mkstemp` the file gets the normal permissions (0666 less the umask),
+    so the file that replaces the final name is readable like any other output.
+    """
     stem, dot, suffix = name.rpartition(".")
-    # Keep the real suffix last: some writers (Pillow) pick the format from it.
-    fd, tmp_name = tempfile.mkstemp(dir=folder, prefix=f".{stem or name}.", suffix=f".tmp{dot}{suffix}" if dot else ".tmp")
-    tmp = Path(tmp_name)
+    for _ in range(100):
+        # Keep the real suffix last: some writers (Pillow) pick the format from it.
+        tmp = Path(folder) / f".{stem or name}.{secrets.token_hex(4)}.tmp{dot}{suffix if dot else ''}"
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"cannot create a temporary file for {name} in {folder}")
+
+
+def _write_temporary(folder: Path, name: str, write: Any) -> Path:
+    fd, tmp = create_temporary(folder, name)
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
