@@ -170,3 +170,19 @@ def test_bad_input_is_a_one_line_user_error(kwargs, match):
     with pytest.raises(UserError, match=match) as info:
         compute_metrics(**kwargs)
     assert "\n" not in str(info.value)
+
+
+def test_small_first_bump_before_a_larger_swing_and_a_wandering_end():
+    # Like the rig with stick-slip friction: a small bump from the poke, a larger swing back while
+    # the cart moves, then a wander about an offset that never settles within one encoder step.
+    t = np.arange(0.0, 5.0, DT)
+    tau = t - POKE
+    alpha = np.where((tau >= 0) & (tau < 0.14), 0.0123 * np.sin(np.pi * tau / 0.14), 0.0)
+    alpha = np.where((tau >= 0.14) & (tau < 0.64), -0.0155 * np.sin(np.pi * (tau - 0.14) / 0.5), alpha)
+    alpha = np.where(tau >= 0.64, -0.004 + 0.012 * np.sin(4.0 * (tau - 0.64)), alpha)
+    for signal, q in ((alpha, 0.0), (quantize(alpha, 0.001), 0.001)):
+        m = compute_metrics(t, signal, poke_start=POKE, q_alpha=q)
+        assert m["peak_time_s"] == pytest.approx(0.07, abs=0.003)
+        assert m["settling_time_s"] is None and m["final_value_rad"] is None
+        assert m["stable"] is False
+        assert m["overshoot_percent"] > 50  # the swing back is larger than the bump

@@ -13,6 +13,8 @@ How the signal is read
 * The deviation from the final value is split into *lobes* (swings to one side) with a hysteresis
   of one encoder step, so the staircase of a quantized signal never creates spurious swings.
   The extremum of a lobe is taken at the middle of its plateau (a quantized peak is flat).
+* The *first peak* is the extremum of the first swing away from the initial value that reaches a
+  tenth of the whole response; the overshoot is the next swing past the final value.
 * The damped frequency comes from the crossings of the final value between lobes, fitted as
   ``c_k = c_0 + k * pi / omega_d + (-1)^k * beta``; the ``beta`` term absorbs the alternating
   offset that quantization gives to up- and down-going crossings.
@@ -177,20 +179,20 @@ def compute_metrics(
 
     # Hysteresis: one encoder step, and never below 1 % of the response (numerical noise).
     h = max(q, 0.01 * amplitude)
-    lobes = _lobes(tw, aw - reference, h)
 
-    # First peak: the first swing in the direction the poke moved the angle. The departure must be
-    # a tenth of the response and clearly beyond any offset between initial and final value, so
-    # that offset cannot fake a direction.
-    threshold = max(h, 0.1 * amplitude, 2.0 * abs(reference - initial))
-    departed = np.flatnonzero(np.abs(aw - initial) > threshold)
-    direction = int(np.sign(aw[departed[0]] - initial)) if departed.size else 0
-    first = next((k for k, lobe in enumerate(lobes) if lobe.sign == direction), None)
+    # First peak: the extremum of the first swing away from the initial value that reaches a tenth
+    # of the response (a staircase step or a tiny wiggle before it does not count), and that turns
+    # after the poke (not a jump already present at the poke's first sample).
+    from_initial = _lobes(tw, aw - initial, h)
+    significant = max(h, 0.1 * amplitude)
+    peak = next(
+        (lobe for lobe in from_initial if lobe.peak_index > 0 and abs(aw[lobe.peak_index] - initial) > significant),
+        None,
+    )
     peak_dev = None
-    if first is not None and lobes[first].closed:
-        lobe = lobes[first]
-        peak_dev = abs(float(aw[lobe.peak_index]) - initial)
-        metrics["peak_time_s"] = lobe.peak_time - poke_start
+    if peak is not None and peak.closed:
+        peak_dev = abs(float(aw[peak.peak_index]) - initial)
+        metrics["peak_time_s"] = peak.peak_time - poke_start
 
     # Settling: the last time the angle entered the band around the final value for good.
     settled = False
@@ -213,15 +215,20 @@ def compute_metrics(
             metrics["settling_time_s"] = max(0.0, float(t_settle) - poke_start)
             metrics["final_value_rad"] = final
 
-    if first is not None and metrics["peak_time_s"] is not None:
-        following = lobes[first + 1 :]
-        peak_from_ref = abs(float(aw[lobes[first].peak_index]) - reference)
-        if following and following[0].closed and peak_from_ref > 0:
-            swing = abs(float(aw[following[0].peak_index]) - reference)
-            metrics["overshoot_percent"] = 100.0 * swing / peak_from_ref
-        elif not following and settled:
-            metrics["overshoot_percent"] = 0.0  # came back without swinging past the final value
-        metrics["natural_frequency_rad_s"] = _damped_frequency(tw, aw - reference, lobes[first:])
+    # Overshoot and frequency: the swings about the final value, from the one holding the peak on.
+    if peak_dev is not None:
+        about_final = _lobes(tw, aw - reference, h)
+        first = _lobe_at(about_final, peak.peak_index)
+        if first is not None and first.sign == peak.sign:
+            k = about_final.index(first)
+            following = about_final[k + 1 :]
+            peak_from_ref = abs(float(aw[peak.peak_index]) - reference)
+            if following and following[0].closed:
+                swing = abs(float(aw[following[0].peak_index]) - reference)
+                metrics["overshoot_percent"] = 100.0 * swing / peak_from_ref
+            elif not following and settled:
+                metrics["overshoot_percent"] = 0.0  # came back without swinging past the final value
+            metrics["natural_frequency_rad_s"] = _damped_frequency(tw, aw - reference, about_final[k:])
 
     metrics["stable"] = bool(cut is None and bounded and settled)
     return metrics
@@ -295,6 +302,14 @@ def _lobes(t: np.ndarray, dev: np.ndarray, h: float) -> list[_Lobe]:
         closed = bool(b < marks.size or (after.size and top - after.min() > h))
         lobes.append(_Lobe(sign, first, last_marked, i0, float(peak_time), closed))
     return lobes
+
+
+def _lobe_at(lobes: list[_Lobe], index: int) -> _Lobe | None:
+    """The lobe whose extent (its first sample up to the next lobe's first sample) holds ``index``."""
+    for lobe, following in zip(lobes, lobes[1:] + [None]):
+        if lobe.start <= index and (following is None or index < following.start):
+            return lobe
+    return None
 
 
 def _parabolic_peak(t: np.ndarray, y: np.ndarray, i: int) -> float:
