@@ -17,7 +17,7 @@ from PIL import Image
 
 from pendulab.analysis.animation import animate_run
 from pendulab.analysis.plots import plot_root_locus, plot_run, root_locus_branches
-from pendulab.analysis.results import COLUMNS, write_results
+from pendulab.analysis.results import write_results
 from pendulab.errors import UserError
 
 REPO = Path(__file__).resolve().parents[1]
