@@ -128,12 +128,21 @@ def test_flat_signal_gives_none_fields():
     assert "NaN" not in json.dumps(m)
 
 
-def test_sustained_oscillation_never_settles():
+def test_sustained_oscillation_never_settles_but_is_stable():
     t = np.arange(0.0, 5.0, DT)
     alpha = 0.01 * np.sin(10.0 * np.clip(t - POKE, 0.0, None))
     m = compute_metrics(t, alpha, poke_start=POKE)
     assert m["natural_frequency_rad_s"] == pytest.approx(10.0, rel=1e-3)
-    assert m["settling_time_s"] is None and m["final_value_rad"] is None
+    assert m["settling_time_s"] is None
+    assert m["final_value_rad"] == pytest.approx(0.0, abs=2e-3)  # mean of the tail
+    assert m["stable"] is True  # a limit cycle that does not grow: the pendulum stayed up
+
+
+def test_growing_oscillation_is_not_stable():
+    t = np.arange(0.0, 5.0, DT)
+    tau = np.clip(t - POKE, 0.0, None)
+    alpha = 0.005 * np.exp(0.5 * tau) * np.sin(10.0 * tau)
+    m = compute_metrics(t, alpha, poke_start=POKE)
     assert m["stable"] is False
 
 
@@ -183,6 +192,7 @@ def test_small_first_bump_before_a_larger_swing_and_a_wandering_end():
     for signal, q in ((alpha, 0.0), (quantize(alpha, 0.001), 0.001)):
         m = compute_metrics(t, signal, poke_start=POKE, q_alpha=q)
         assert m["peak_time_s"] == pytest.approx(0.07, abs=0.003)
-        assert m["settling_time_s"] is None and m["final_value_rad"] is None
-        assert m["stable"] is False
+        assert m["settling_time_s"] is None
+        assert m["final_value_rad"] == pytest.approx(-0.004, abs=3e-3)
+        assert m["stable"] is True  # wanders within twice the first peak: stayed up, not growing
         assert m["overshoot_percent"] > 50  # the swing back is larger than the bump
