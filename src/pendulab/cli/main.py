@@ -41,10 +41,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Options whose values often start with a minus sign ("--zeros -3,-6"): argparse would take such a
+#: value for an option, so it is joined to its option ("--zeros=-3,-6") before parsing.
+SIGNED_VALUE_OPTIONS = frozenset({"--zeros", "--poles", "--gain", "--compensator", "--pid", "--poke", "--friction"})
+
+
+def _join_signed_values(argv: Sequence[str]) -> list[str]:
+    out: list[str] = []
+    it = iter(argv)
+    for arg in it:
+        if arg in SIGNED_VALUE_OPTIONS:
+            value = next(it, None)
+            if value is not None and value.startswith("-") and value[1:2] not in ("-", ""):
+                out.append(f"{arg}={value}")
+                continue
+            out.append(arg)
+            if value is not None:
+                out.append(value)
+            continue
+        out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
         if not getattr(args, "func", None):
             parser.print_help()
             return 2
@@ -55,6 +77,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("pendulab: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into 'head' and the like
+        return 0
 
 
 if __name__ == "__main__":

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
-from pendulab.model.parameters import CARTS, PENDULUMS, PlantParameters
+from pendulab.errors import UserError
+from pendulab.model.parameters import CARTS, PlantParameters
 
 
 def add_plant_options(parser: argparse.ArgumentParser, *, pendulums: tuple[str, ...] = ("long", "short")) -> None:
@@ -22,3 +24,62 @@ def plant_parameters_from_args(args: argparse.Namespace) -> PlantParameters:
 
         params = load_calibration(args.calibration).apply(params)
     return params
+
+
+def add_controller_options(parser: argparse.ArgumentParser) -> None:
+    """The controller flags: kernel, compensators, PID, a controller file or the demo controller."""
+    given = parser.add_argument_group("controller (kernel G1 and compensators G2..G6)")
+    given.add_argument("--zeros", metavar="LIST", help="kernel zeros, e.g. '-3,-6' or '-2+1j,-2-1j' ('' for none)")
+    given.add_argument("--poles", metavar="LIST", help="kernel poles, e.g. '-30,-0.1'")
+    given.add_argument("--gain", metavar="K", help="kernel gain")
+    given.add_argument("--compensator", action="append", default=[], metavar="ZEROS;POLES[;GAIN]",
+                       help="add a compensator (repeatable), e.g. '-2;-20'")
+    given.add_argument("--pid", metavar="KP,KI,KD", help="PID controller Kp + Ki/(s+1/Ti) + Kd*wf*s/(s+wf)")
+    given.add_argument("--controller", metavar="FILE", help="controller file (TOML or JSON)")
+    given.add_argument("--demo", action="store_true", help="a good default controller for the chosen pendulum")
+
+
+def controller_from_args(args: argparse.Namespace) -> Any | None:
+    """The controller the flags describe, or None when none was given."""
+    from pendulab import control as ctl
+
+    sources = [
+        name
+        for name, present in (
+            ("--zeros/--poles/--gain", args.zeros is not None or args.poles is not None or args.gain is not None),
+            ("--pid", args.pid is not None),
+            ("--controller", args.controller is not None),
+            ("--demo", args.demo),
+        )
+        if present
+    ]
+    if len(sources) > 1:
+        raise UserError(f"give one controller, not {' and '.join(sources)}")
+    if args.compensator and not (args.zeros is not None or args.poles is not None or args.gain is not None or args.controller or args.demo):
+        raise UserError("--compensator needs a kernel: give --zeros, --poles and --gain (or --controller FILE)")
+    if args.demo:
+        base = ctl.demo_controller(args.pendulum)
+    elif args.controller:
+        base = ctl.load_controller_file(args.controller)
+    elif args.pid is not None:
+        parts = args.pid.split(",")
+        try:
+            kp, ki, kd = (float(p) for p in parts)
+        except ValueError:
+            raise UserError(f"--pid {args.pid!r} must be three numbers KP,KI,KD, e.g. --pid 40,5,4") from None
+        return ctl.Controller.pid(kp, ki, kd)
+    elif args.zeros is not None or args.poles is not None or args.gain is not None:
+        if args.gain is None:
+            raise UserError("the kernel needs a gain: add --gain K")
+        try:
+            gain = float(args.gain)
+        except ValueError:
+            raise UserError(f"--gain {args.gain!r} is not a number; give e.g. --gain 80") from None
+        base = ctl.Controller([ctl.Factor(ctl.parse_numbers(args.zeros or ""), ctl.parse_numbers(args.poles or ""), gain)])
+    else:
+        return None
+    if args.compensator:
+        base = ctl.Controller([*base.factors, *(ctl.parse_compensator(c) for c in args.compensator)])
+    return base
+
+

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pendulab.cli.options import add_plant_options, plant_parameters_from_args
+from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
 from pendulab.errors import UserError
 
 POKE_DEFAULT = (50.0, 0.005, 1.0)
@@ -32,15 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    given = parser.add_argument_group("controller (kernel G1 and compensators G2..G6)")
-    given.add_argument("--zeros", metavar="LIST", help="kernel zeros, e.g. '-3,-6' or '-2+1j,-2-1j' ('' for none)")
-    given.add_argument("--poles", metavar="LIST", help="kernel poles, e.g. '-30,-0.1'")
-    given.add_argument("--gain", metavar="K", help="kernel gain")
-    given.add_argument("--compensator", action="append", default=[], metavar="ZEROS;POLES[;GAIN]",
-                       help="add a compensator (repeatable), e.g. '-2;-20'")
-    given.add_argument("--pid", metavar="KP,KI,KD", help="PID controller Kp + Ki/(s+1/Ti) + Kd*wf*s/(s+wf)")
-    given.add_argument("--controller", metavar="FILE", help="controller file (TOML or JSON)")
-    given.add_argument("--demo", action="store_true", help="a good default controller for the chosen pendulum")
+    add_controller_options(parser)
     add_plant_options(parser)
     parser.add_argument("--poke", metavar="MAG,DUR,START", help="poke magnitude (rad/s^2), duration (s), start (s); default 50,0.005,1")
     parser.add_argument("--stop-time", type=float, default=5.0, metavar="T", help="simulated time in s (default 5)")
@@ -68,50 +60,6 @@ def parse_poke(text: str) -> tuple[float, float, float]:
     return magnitude, duration, start
 
 
-def controller_from_args(args: argparse.Namespace) -> Any | None:
-    """The controller the flags describe, or None when none was given."""
-    from pendulab.control import controller as ctl
-
-    sources = [
-        name
-        for name, present in (
-            ("--zeros/--poles/--gain", args.zeros is not None or args.poles is not None or args.gain is not None),
-            ("--pid", args.pid is not None),
-            ("--controller", args.controller is not None),
-            ("--demo", args.demo),
-        )
-        if present
-    ]
-    if len(sources) > 1:
-        raise UserError(f"give one controller, not {' and '.join(sources)}")
-    if args.compensator and not (args.zeros is not None or args.poles is not None or args.gain is not None or args.controller or args.demo):
-        raise UserError("--compensator needs a kernel: give --zeros, --poles and --gain (or --controller FILE)")
-    if args.demo:
-        base = ctl.demo_controller(args.pendulum)
-    elif args.controller:
-        base = ctl.load_controller_file(args.controller)
-    elif args.pid is not None:
-        parts = args.pid.split(",")
-        try:
-            kp, ki, kd = (float(p) for p in parts)
-        except ValueError:
-            raise UserError(f"--pid {args.pid!r} must be three numbers KP,KI,KD, e.g. --pid 40,5,4") from None
-        return ctl.Controller.pid(kp, ki, kd)
-    elif args.zeros is not None or args.poles is not None or args.gain is not None:
-        if args.gain is None:
-            raise UserError("the kernel needs a gain: add --gain K")
-        try:
-            gain = float(args.gain)
-        except ValueError:
-            raise UserError(f"--gain {args.gain!r} is not a number; give e.g. --gain 80") from None
-        base = ctl.Controller([ctl.Factor(ctl.parse_numbers(args.zeros or ""), ctl.parse_numbers(args.poles or ""), gain)])
-    else:
-        return None
-    if args.compensator:
-        base = ctl.Controller([*base.factors, *(ctl.parse_compensator(c) for c in args.compensator)])
-    return base
-
-
 def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     if not (args.stop_time > 0 and math.isfinite(args.stop_time)):
@@ -123,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
     if controller is None:
         if not sys.stdin.isatty():
             raise UserError("no controller given: use --demo, --zeros/--poles/--gain, --pid or --controller FILE (or run on a terminal to be asked)")
-        from pendulab.control.prompt import run_prompt
+        from pendulab.control.prompt import prompt_simulation
 
-        answers = run_prompt()
+        answers = prompt_simulation()
         controller = answers.controller
         args.pendulum = answers.pendulum
         args.calibration = answers.calibration or args.calibration

@@ -7,7 +7,8 @@ import json
 
 import numpy as np
 
-from pendulab.cli.options import add_plant_options, plant_parameters_from_args
+from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
+from pendulab.errors import UserError
 from pendulab.model.linear import linearize
 
 
@@ -20,6 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_plant_options(parser)
     parser.add_argument("--output", choices=("alpha", "x", "tip"), default="alpha", help="output signal (default alpha)")
     parser.add_argument("--json", action="store_true", help='print one JSON object {"zeros", "poles", "gain"}')
+    parser.add_argument("--root-locus", metavar="FILE", help="write the root locus of the loop Lp*C(s)*G(s) as PNG (needs a controller)")
+    add_controller_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -52,9 +55,21 @@ def format_zpk(zeros: np.ndarray, poles: np.ndarray, gain: float) -> str:
 
 def run(args: argparse.Namespace) -> int:
     params = plant_parameters_from_args(args)
-    zeros, poles, gain = linearize(params).zpk(args.output)
+    plant = linearize(params)
+    zeros, poles, gain = plant.zpk(args.output)
+    controller = controller_from_args(args)
+    if args.root_locus:
+        if controller is None:
+            raise UserError("--root-locus needs a controller: add --demo, --zeros/--poles/--gain, --pid or --controller FILE")
+        from pendulab.analysis.plots import plot_root_locus
+
+        # The loop the controller closes: e = -Lp*alpha, so the loop gain is Lp*C(s)*G(s).
+        loop = controller.transfer_function() * plant.tf("tip")
+        plot_root_locus(loop, args.root_locus, title=f"root locus of Lp·C(s)·G(s), {args.pendulum} pendulum")
     if args.json:
         print(json.dumps({"zeros": [_number(z) for z in zeros], "poles": [_number(p) for p in poles], "gain": gain}))
     else:
         print(f"{args.output}/V = {format_zpk(zeros, poles, gain)}")
+        if args.root_locus:
+            print(f"root locus written to {args.root_locus}")
     return 0

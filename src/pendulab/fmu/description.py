@@ -130,7 +130,7 @@ def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
         f"  description={quoteattr(spec.description)}",
         f'  generationTool="{GENERATOR}"',
         '  variableNamingConvention="structured"',
-        f'  numberOfEventIndicators="0">',
+        '  numberOfEventIndicators="0">',
     ]
     if spec.model_exchange:
         lines.append(

@@ -42,8 +42,10 @@ class LinearPlant:
         """Minimal transfer function from ``V`` to ``output`` (``alpha``, ``x`` or ``tip``)."""
         index = OUTPUT_NAMES.index(output)
         siso = control.ss(self.ss.A, self.ss.B, self.ss.C[index : index + 1, :], self.ss.D[index : index + 1, :])
-        # Cancel the pole-zero pairs at s = 0 that the cart position leaves in alpha/V.
-        return control.minreal(control.tf(siso), tol=1e-6, verbose=False)
+        # Cancel the pole-zero pairs at s = 0 that the cart position leaves in alpha/V, and drop the
+        # round-off left in the leading coefficients (it would show as a zero near infinity).
+        g = control.minreal(control.tf(siso), tol=1e-6, verbose=False)
+        return control.tf(_trim(g.num[0][0]), _trim(g.den[0][0]))
 
     def zpk(self, output: str = "alpha") -> tuple[np.ndarray, np.ndarray, float]:
         """Zeros, poles and gain of the minimal transfer function.
@@ -51,7 +53,7 @@ class LinearPlant:
         The gain is the leading coefficient ratio: ``G(s) = k * prod(s - z) / prod(s - p)``.
         """
         g = self.tf(output)
-        num, den = _trim(g.num[0][0]), _trim(g.den[0][0])
+        num, den = np.atleast_1d(g.num[0][0]), np.atleast_1d(g.den[0][0])
         zeros = _clean(np.roots(num))
         poles = _clean(np.roots(den))
         return zeros, poles, float(num[0] / den[0])

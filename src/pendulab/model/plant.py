@@ -74,7 +74,7 @@ def plant_equations(
     signals : dict
         ``V_applied``, ``current``, ``F_motor``, ``F_friction``.
     """
-    x, xdot, alpha, alphadot = state[0], state[1], state[2], state[3]
+    xdot, alpha, alphadot = state[1], state[2], state[3]  # the position x enters no force
 
     # Amplifier: voltage saturation, then the optional current limit on (V - back-EMF)/Rm.
     V_applied = ca.fmin(ca.fmax(V, -p["V_max"]), p["V_max"])
