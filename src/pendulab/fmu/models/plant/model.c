@@ -58,6 +58,11 @@ fmi2Status model_do_step(Instance *comp, double t, double h) {
     /* Equal RK4 sub-steps of at most MAX_SUBSTEP, the same rule as pendulab.model.plant.substeps. */
     int n = (int)ceil(h / MAX_SUBSTEP - 1e-9), k;
     if (n < 1) n = 1;
+    /* fmin/fmax ignore NaN, so the saturation would turn a NaN command into -V_max: refuse it instead. */
+    if (!isfinite(comp->r[VR_V])) {
+        fmu_log(comp, fmi2Error, "logStatusError", "input V=%g is not finite at t=%g", comp->r[VR_V], t);
+        return fmi2Error;
+    }
     hs = h / n;
     arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &ts; arg[4] = &hs;
     res[0] = w->next;
