@@ -244,7 +244,8 @@ def test_fmpy_compile_rebuilds_the_binary_from_sources(plant_fmu: Path, plant_un
     assert "linux64" in supported_platforms(str(stripped))
     assert validate_fmu(str(stripped)) == []
     rebuilt = Path(extract(str(stripped), unzipdir=str(tmp_path / "rebuilt")))
-    np.testing.assert_array_equal(run_cs(rebuilt), run_cs(plant_unzipdir))
+    # Another compiler configuration (CMake Release) may round differently in the last bits, no more.
+    np.testing.assert_allclose(run_cs(rebuilt), run_cs(plant_unzipdir), rtol=1e-12, atol=1e-12)
 
 
 # ---------------------------------------------------------------- the build commands
