@@ -199,7 +199,7 @@ def test_zpk_and_transfer_function_agree():
 
 def test_describe_and_str():
     c = demo_controller()
-    assert str(c) == "45000 (s + 6)(s + 16) / ((s - 6.4)(s + 80)^2)"
+    assert str(c) == "40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)"
     text = c.describe()
     assert "(kernel)" in text and "(compensator 2)" in text and text.count("\n") == 4
     assert "G3(s) = 1 / (s + 80)" in text
@@ -309,8 +309,8 @@ def test_controller_files_round_trip(tmp_path):
 def test_handwritten_toml_file(tmp_path):
     path = tmp_path / "mine.TOML"
     path.write_text(
-        '# my controller\n[kernel]\nzeros = [-6]\npoles = [6.4]\ngain = 45000\n\n'
-        '[[compensators]]\nzeros = ["-16"]\npoles = [-80]\n\n[[compensators]]\npoles = [-80]\n'
+        '# my controller\n[kernel]\nzeros = [-5]\npoles = [7]\ngain = 40000\n\n'
+        '[[compensators]]\nzeros = ["-17"]\npoles = [-80]\n\n[[compensators]]\npoles = [-80]\n'
     )
     assert load_controller_file(path) == demo_controller()
     path2 = tmp_path / "pair.toml"

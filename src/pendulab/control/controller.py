@@ -16,11 +16,11 @@ numbers are written ``-3+4j`` (or ``-3+4i``), and ``""`` or ``none`` means no ro
 Examples
 --------
 >>> from pendulab.control.controller import Controller, Factor, parse_compensator
->>> c = Controller([Factor([-6], [6.4], 45000), parse_compensator("-16;-80"), parse_compensator("none;-80")])
+>>> c = Controller([Factor([-5], [7], 40000), parse_compensator("-17;-80"), parse_compensator("none;-80")])
 >>> print(c)
-45000 (s + 6)(s + 16) / ((s - 6.4)(s + 80)^2)
+40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)
 >>> c.to_dict()["compensators"][0]
-{'zeros': [-16.0], 'poles': [-80.0], 'gain': 1.0}
+{'zeros': [-17.0], 'poles': [-80.0], 'gain': 1.0}
 >>> Controller.pid(kp=2.0, ki=0.0, kd=0.0).zpk()
 (array([], dtype=float64), array([], dtype=float64), 2.0)
 >>> Controller.from_zpk([0], [-1], 1.0)
@@ -240,8 +240,8 @@ class Factor:
 
     Examples
     --------
-    >>> Factor([-16], [-80])
-    Factor(zeros=(-16.0,), poles=(-80.0,), gain=1.0)
+    >>> Factor([-17], [-80])
+    Factor(zeros=(-17.0,), poles=(-80.0,), gain=1.0)
     >>> Factor(["-3+4j", "-3-4j"], [-1, -2, -50], gain=2.0).zeros
     ((-3+4j), (-3-4j))
     """
@@ -277,7 +277,7 @@ class Factor:
         return f"{format_numbers(self.zeros)};{format_numbers(self.poles)};{format_number(self.gain)}"
 
     def describe(self) -> str:
-        """``45000 (s + 6) / (s - 6.4)``."""
+        """``40000 (s + 5) / (s - 7)``."""
         return format_zpk(self.zeros, self.poles, self.gain)
 
 
@@ -305,7 +305,7 @@ class Controller:
 
     Examples
     --------
-    >>> c = Controller([Factor([-6], [6.4], 45000), Factor([-16], [-80]), Factor([], [-80])])
+    >>> c = Controller([Factor([-5], [7], 40000), Factor([-17], [-80]), Factor([], [-80])])
     >>> c.order, len(c.compensators)
     (3, 2)
     >>> Controller.from_dict(c.to_dict()) == c
@@ -390,11 +390,11 @@ class Controller:
 
         Examples
         --------
-        >>> print(Controller([Factor([-6], [6.4], 45000), Factor([-16], [-80])]).describe())
+        >>> print(Controller([Factor([-5], [7], 40000), Factor([-17], [-80])]).describe())
         G(s) = G1(s)·G2(s)
-          G1(s) = 45000 (s + 6) / (s - 6.4)    (kernel)
-          G2(s) = (s + 16) / (s + 80)    (compensator 1)
-          G(s)  = 45000 (s + 6)(s + 16) / ((s - 6.4)(s + 80))
+          G1(s) = 40000 (s + 5) / (s - 7)    (kernel)
+          G2(s) = (s + 17) / (s + 80)    (compensator 1)
+          G(s)  = 40000 (s + 5)(s + 17) / ((s - 7)(s + 80))
         """
         names = [f"G{i + 1}(s)" for i in range(len(self.factors))]
         lines = [f"G(s) = {'·'.join(names)}"]
@@ -574,7 +574,7 @@ def _pair_factor(root: complex) -> str:
 
 
 def format_zpk(zeros: Sequence[Number], poles: Sequence[Number], gain: float) -> str:
-    """``45000 (s + 6)(s + 16) / ((s - 6.4)(s + 80)^2)``; conjugate pairs as real quadratics.
+    """``40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)``; conjugate pairs as real quadratics.
 
     Examples
     --------
@@ -612,7 +612,7 @@ def format_zpk(zeros: Sequence[Number], poles: Sequence[Number], gain: float) ->
 
 
 def parse_compensator(text: str, label: str = "compensator") -> Factor:
-    """``"ZEROS;POLES[;GAIN]"``, e.g. ``"-16;-80"``, ``"none;-80"`` or ``"-1;-10;2.5"``.
+    """``"ZEROS;POLES[;GAIN]"``, e.g. ``"-17;-80"``, ``"none;-80"`` or ``"-1;-10;2.5"``.
 
     Examples
     --------
@@ -639,8 +639,8 @@ def parse_controller(zeros: str, poles: str, gain: Any, compensators: Sequence[s
 
     Examples
     --------
-    >>> print(parse_controller("-6", "6.4", "45000", ["-16;-80", "none;-80"]))
-    45000 (s + 6)(s + 16) / ((s - 6.4)(s + 80)^2)
+    >>> print(parse_controller("-5", "7", "40000", ["-17;-80", "none;-80"]))
+    40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)
     """
     if gain is None or (isinstance(gain, str) and not gain.strip()):
         raise ControllerError("the kernel has no gain; give the kernel's gain (a non-zero number)")
@@ -655,29 +655,32 @@ def parse_controller(zeros: str, poles: str, gain: Any, compensators: Sequence[s
 
 # ---------------------------------------------------------------------------------------------- demo
 #: The demo controller's factors (kernel, two compensators). See :func:`demo_controller`.
-DEMO_FACTORS = (((-6.0,), (6.4,), 45000.0), ((-16.0,), (-80.0,), 1.0), ((), (-80.0,), 1.0))
+DEMO_FACTORS = (((-5.0,), (7.0,), 40000.0), ((-17.0,), (-80.0,), 1.0), ((), (-80.0,), 1.0))
 
 
 def demo_controller(pendulum: str = "long") -> Controller:
-    """A controller that balances both pendulums: ``45000 (s+6)(s+16) / ((s-6.4)(s+80)^2)``.
+    """A controller that balances both pendulums: ``40000 (s+5)(s+17) / ((s-7)(s+80)^2)``.
+
+    Kernel ``40000 (s+5)/(s-7)``, compensators ``(s+17)/(s+80)`` and ``1/(s+80)``.
 
     The plant ``alpha/V`` has a zero at ``s = 0`` and one unstable pole (``+4.84`` long, ``+6.40``
     short), so only an *unstable* controller can stabilize the tip loop (parity interlacing): the
-    kernel's pole at ``+6.4`` does this. The zero at ``-16`` sits near the cart's fast pole and
+    kernel's pole at ``+7`` does this. The zero at ``-17`` sits near the cart's fast pole and
     ``(s+80)^2`` rolls off the encoder noise. Designed for both lengths at once on the sampled linear
     loop (1 ms, Tustin, one sample of computation delay, :mod:`pendulab.control.loop`):
 
-    ========  ===========================  ==============  ==================
+    ========  ============================  ==============  ================
     pendulum  slowest closed-loop pole      least damping   stable loop gain
-    ========  ===========================  ==============  ==================
-    long      s = -1.38 (z = 0.99862)       0.54            0.48x .. 3.8x
-    short     s = -4.53±2.93j (z = 0.99548)  0.61            0.60x .. 3.9x
-    ========  ===========================  ==============  ==================
+    ========  ============================  ==============  ================
+    long      s = -2.39 (z = 0.99761)       0.58            0.56x .. 4.2x
+    short     s = -2.97±4.88j (z = 0.99704) 0.52            0.70x .. 4.3x
+    ========  ============================  ==============  ================
 
-    A 50 rad/s² 5 ms poke gives a swing of 0.8° (long) / 0.9° (short) with at most 2 V, settling
-    in about 2 s (long) / 1 s (short) in the linear model; the cart drifts by 3 to 11 cm (no integral
-    action is possible through the plant's zero at 0). With the lab's stick-slip friction the
-    pendulum keeps a small limit cycle of about ±1° instead of settling completely.
+    A 50 rad/s² 5 ms poke gives a swing of 1.1° (long) / 1.3° (short) with at most 2 V, settling in
+    about 1.7 s (long) / 1.3 s (short) in the linear model; the cart drifts by 8 cm (long) / 2 cm
+    (short), as no integral action is possible through the plant's zero at 0. The lab's 220 rad/s²
+    poke gives about 5° with up to 8.7 V and moves the cart 0.35 m. With the lab's stick-slip
+    friction the pendulum keeps a limit cycle of about ±0.7° (long) / ±1.3° (short).
 
     Parameters
     ----------
@@ -693,8 +696,8 @@ def demo_controller(pendulum: str = "long") -> Controller:
 def unstable_example(pendulum: str = "long") -> Controller:
     """The demo controller with the wrong sign of the gain: the pendulum falls at once.
 
-    For tests of the safety cuts: the sampled loop has a real pole at ``z = 1.024`` (1 ms), so any
-    deviation grows e-fold every 42 ms and the angle passes 15° within about half a second of a poke.
+    For tests of the safety cuts: the sampled loop has a real pole at ``z = 1.023`` (1 ms), so any
+    deviation grows e-fold every 43 ms; after the default poke the angle passes 15° within 0.2 s.
     """
     demo = demo_controller(pendulum)
     kernel = demo.kernel

@@ -8,12 +8,12 @@ strings ``"-3+4j"``. Anything else (unknown keys, malformed text, unreadable fil
 Example ``controller.toml``::
 
     [kernel]
-    zeros = [-6]
-    poles = [6.4]
-    gain = 45000
+    zeros = [-5]
+    poles = [7]
+    gain = 40000
 
     [[compensators]]
-    zeros = [-16]
+    zeros = [-17]
     poles = [-80]
 
     [[compensators]]
