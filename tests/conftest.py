@@ -21,3 +21,25 @@ def plant_unzipdir(plant_fmu: Path, tmp_path_factory: pytest.TempPathFactory) ->
     from fmpy import extract
 
     return Path(extract(str(plant_fmu), unzipdir=str(tmp_path_factory.mktemp("Plant"))))
+
+
+@pytest.fixture(scope="session")
+def controller_fmu() -> Path:
+    """Path of ``fmus/Controller.fmu``, built first if it is missing or older than its sources."""
+    from pendulab.fmu.build import ensure_fmu
+
+    return ensure_fmu("Controller")
+
+
+@pytest.fixture(scope="session")
+def supervisor_fmu() -> Path:
+    """Path of ``fmus/Supervisor.fmu``, built first if it is missing or older than its sources."""
+    from pendulab.fmu.build import ensure_fmu
+
+    return ensure_fmu("Supervisor")
+
+
+@pytest.fixture(scope="session")
+def loop_fmus(plant_fmu: Path, controller_fmu: Path, supervisor_fmu: Path) -> dict[str, Path]:
+    """The three FMUs of the lab's loop (built once), by component name."""
+    return {"plant": plant_fmu, "controller": controller_fmu, "supervisor": supervisor_fmu}

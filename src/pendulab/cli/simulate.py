@@ -13,6 +13,8 @@ from pendulab.cli.options import add_controller_options, add_plant_options, cont
 from pendulab.errors import UserError
 
 POKE_DEFAULT = (50.0, 0.005, 1.0)
+#: Longest run in steps (the log is kept in memory): 2000 s at 1 kHz.
+MAX_STEPS = 2_000_000
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -66,6 +68,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--stop-time {args.stop_time} must be a positive number of seconds")
     if not (0 < args.step <= 0.1):
         raise UserError(f"--step {args.step} must be within (0, 0.1] s; the lab runs at 0.001")
+    if args.stop_time / args.step > MAX_STEPS:
+        # The log is held in memory (9 signals per step): refuse before allocating it.
+        raise UserError(
+            f"--stop-time {args.stop_time:g} s at --step {args.step:g} s is {args.stop_time / args.step:.3g} steps; "
+            f"a run has at most {MAX_STEPS:,}: shorten the run or lengthen the step"
+        )
     poke = parse_poke(args.poke) if args.poke else None
     controller = controller_from_args(args)
     if controller is None:
@@ -80,10 +88,15 @@ def run(args: argparse.Namespace) -> int:
         poke = poke or answers.poke
     params = plant_parameters_from_args(args)
     poke = poke or POKE_DEFAULT
+    if poke[2] >= args.stop_time:
+        # Checked before simulating: the metrics are measured from the poke on.
+        raise UserError(f"the poke starts at t={poke[2]:g} s, not before the stop time {args.stop_time:g} s; start the poke earlier or lengthen --stop-time")
     params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
     if args.no_quantization:
         params = params.with_values(q_alpha=0.0, q_x=0.0)
     out_dir = args.out or _new_run_dir(args.pendulum)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"output folder {out_dir} is a file; give a folder name for --out")
 
     from pendulab.analysis.results import write_results
     from pendulab.cosim.pendulum import simulate_poke
@@ -92,15 +105,21 @@ def run(args: argparse.Namespace) -> int:
         if sys.stderr.isatty():
             print(f"\r  simulated {t:5.1f} / {args.stop_time:g} s", end="", file=sys.stderr, flush=True)
 
-    result = simulate_poke(
-        controller,
-        params,
-        stop_time=args.stop_time,
-        step=args.step,
-        method=args.method,
-        meta={"pendulum": args.pendulum, "cart": args.cart, "calibration": args.calibration or "default"},
-        progress=progress,
-    )
+    from pendulab.cosim.master import SimulationError
+
+    try:
+        result = simulate_poke(
+            controller,
+            params,
+            stop_time=args.stop_time,
+            step=args.step,
+            method=args.method,
+            meta={"pendulum": args.pendulum, "cart": args.cart, "calibration": args.calibration or "default"},
+            progress=progress,
+        )
+    except SimulationError as exc:
+        # An FMU refused the inputs (e.g. a poke so large that the state overflows): nothing is written.
+        raise UserError(f"the simulation failed: {exc}; check the controller, the poke and the parameters") from None
     if sys.stderr.isatty():
         print("\r" + " " * 40 + "\r", end="", file=sys.stderr)
     paths = write_results(out_dir, result.columns, result.meta, result.metrics)

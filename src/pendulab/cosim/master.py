@@ -179,6 +179,21 @@ class Master:
             except Exception as exc:  # fmpy raises FMICallException with the status only
                 raise SimulationError(f"{name}: initialization failed ({exc}); check its start values") from exc
 
+    def _check_wiring(self, record: Sequence[str]) -> None:
+        """Every connection joins an output to an input of the same type; recorded names exist."""
+        for c in self.system.connections:
+            source = self.instances[c.source].variable(c.source_variable)
+            target = self.instances[c.target].variable(c.target_variable)
+            if source.causality != "output":
+                raise UserError(f"connection {c} starts at {c.source}.{c.source_variable} (causality {source.causality}); a connection starts at an output")
+            if target.causality != "input":
+                raise UserError(f"connection {c} ends at {c.target}.{c.target_variable} (causality {target.causality}); a connection ends at an input")
+            if _base(source.type) != _base(target.type):
+                raise UserError(f"connection {c} joins a {_base(source.type)} to a {_base(target.type)}; connect variables of the same type")
+        for path in record:
+            component, _, variable = path.partition(".")
+            self.instances[component].variable(variable)
+
     # ------------------------------------------------------------------ the loop
     def _apply_events(self, pending: list[Event], t: float, reset_after_step: list) -> None:
         for inst, name, value in reset_after_step:
@@ -197,6 +212,7 @@ class Master:
         """The same plan, run by the compiled runner between the points where Python must act."""
         ops, names = plan.native_ops()
         reset_after_step: list = []
+        failed_at = ctypes.c_long(0)
         k = 0
         t0 = float(time[0])
         while k <= n_steps:
@@ -210,9 +226,9 @@ class Master:
                 end = min(end, max(k + 1, int(np.searchsorted(time, pending[0].time - 1e-12))))
             if stop_when is not None or progress is not None:
                 end = min(end, (k // 100 + 1) * 100)
-            failed = runner(ops, len(ops), k, end, n_steps, t0, h)
+            failed = runner(ops, len(ops), k, end, n_steps, t0, h, ctypes.byref(failed_at))
             if failed >= 0:
-                raise SimulationError(f"{names[failed]} failed near t={time[min(end, n_steps)]:.4f} s (the FMU's log has the reason)")
+                raise SimulationError(f"{names[failed]} failed at t={time[failed_at.value]:.4f} s (the FMU's log has the reason)")
             k = end
             if k <= n_steps and k % 100 == 0:
                 if stop_when is not None and stop_when(plan.row(k - 1)):
@@ -256,9 +272,14 @@ class Master:
                 raise UserError(f"cannot record {path!r}: no component {path.partition('.')[0]!r}")
         pending = sorted(events, key=lambda e: e.time)
         for event in pending:
-            self.instances[event.target.partition(".")[0]].variable(event.target.partition(".")[2]) if event.target.partition(".")[0] in self.instances else None
-            if event.target.partition(".")[0] not in self.instances:
+            component, _, name = event.target.partition(".")
+            if component not in self.instances:
                 raise UserError(f"event target {event.target!r} names no component")
+            variable = self.instances[component].variable(name)
+            # FMI 2.0 allows only inputs and tunable parameters to change during the run.
+            if variable.causality != "input" and not (variable.causality == "parameter" and variable.variability == "tunable"):
+                raise UserError(f"event target {event.target!r} is a {variable.variability} {variable.causality}; an event sets an input")
+        self._check_wiring(record)
         self._initialize(start_time, stop_time)
         plan = _Plan(self, n_steps, record)
         time = start_time + h * np.arange(n_steps + 1)
@@ -273,20 +294,25 @@ class Master:
             if reset_after_step or (pending and pending[0].time <= t + 1e-12):
                 self._apply_events(pending, t, reset_after_step)
             # Components in order: inputs from the outputs already known at this point, then outputs.
+            # (A get or set that fails stops the run, as in the native runner.)
             for copies, sets, gets in phase_a:
                 for src, offset, dst, di in copies:
                     dst[di] = src[k * offset[0] + offset[1]]
                 for f, handle, vrs, n, buf in sets:
-                    f(handle, vrs, n, buf)
+                    if f(handle, vrs, n, buf) > 1:
+                        plan.fail(f, t)
                 for f, handle, vrs, n, base, row in gets:
-                    f(handle, vrs, n, base + k * row)
+                    if f(handle, vrs, n, base + k * row) > 1:
+                        plan.fail(f, t)
             # Inputs fed by components evaluated later (the plant's voltage), then what they change.
             for src, offset, dst, di in late[0]:
                 dst[di] = src[k * offset[0] + offset[1]]
             for f, handle, vrs, n, buf in late[1]:
-                f(handle, vrs, n, buf)
+                if f(handle, vrs, n, buf) > 1:
+                    plan.fail(f, t)
             for f, handle, vrs, n, base, row in recorders:
-                f(handle, vrs, n, base + k * row)
+                if f(handle, vrs, n, base + k * row) > 1:
+                    plan.fail(f, t)
             if k == n_steps:
                 break
             for name, do_step, handle in steps:
@@ -328,7 +354,8 @@ def _native_runner() -> Any | None:
         try:
             lib = ctypes.CDLL(str(build_helper_library(Path(__file__).parent / "c" / "plan_runner.c")))
             f = lib.pendulab_run_plan
-            f.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_double, ctypes.c_double]
+            f.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_double, ctypes.c_double,
+                          ctypes.POINTER(ctypes.c_long)]
             f.restype = ctypes.c_long
             _RUNNER.append(f)
         except Exception:  # noqa: BLE001 - no compiler: the Python loop runs the same plan
@@ -469,6 +496,10 @@ class _Plan:
         array = (_Op * len(ops))(*ops)
         self._keep.append(array)
         return array, labels
+
+    def fail(self, f: Any, t: float) -> None:
+        """Raise the error of a failed get/set call ``f`` at time ``t`` (worded as the native runner's)."""
+        raise SimulationError(f"{self._labels.get(id(f), 'fmi2Get/Set')} failed at t={t:.4f} s (the FMU's log has the reason)")
 
     def _lookup(self, path: str) -> tuple[np.ndarray, int]:
         comp, _, var = path.partition(".")

@@ -4,6 +4,10 @@ The archive holds ``SystemStructure.ssd`` (components, their connectors, start v
 parameter sets, and the connections) and the FMUs under ``resources/``, so any SSP tool (fmpy's
 ``fmpy.ssp``, Ecos, OMSimulator) can load the same loop.
 
+Every component's start values are an inline parameter set of the same name,
+:data:`PARAMETER_SET` (``"initialValues"``): tools that select parameter sets by name apply all of
+them at once, e.g. Ecos with ``EcosSimulation(ssp_path=..., step_size=1e-3).init(parameter_set="initialValues")``.
+
 Examples
 --------
 >>> export_ssp(system, "runs/demo/loop.ssp")          # doctest: +SKIP
@@ -26,6 +30,9 @@ NAMESPACES = (
     'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
     'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"'
 )
+
+#: Name of the parameter set that holds every component's start values.
+PARAMETER_SET = "initialValues"
 
 
 def _value(type_name: str, value: object) -> str:
@@ -65,7 +72,7 @@ def system_structure(system: System, name: str = "pendulab", stop_time: float = 
                 "        <ssd:ParameterBindings>",
                 "          <ssd:ParameterBinding>",
                 "            <ssd:ParameterValues>",
-                f"              <ssv:ParameterSet version=\"1.0\" name={quoteattr(component.name)}>",
+                f"              <ssv:ParameterSet version=\"1.0\" name={quoteattr(PARAMETER_SET)}>",
                 "                <ssv:Parameters>",
             ]
             for var, value in component.start_values.items():

@@ -24,10 +24,12 @@ typedef struct {
 } Op;
 
 /* Runs communication points k0 .. k1-1. At k == last the plan stops at the barrier (no step after
- * the final point). Returns -1 when done, else the index of the operation that failed. */
-long pendulab_run_plan(const Op *ops, long n_ops, long k0, long k1, long last, double t0, double h) {
+ * the final point). Returns -1 when done, else the index of the operation that failed, with the
+ * communication point it failed at in *failed_at. */
+long pendulab_run_plan(const Op *ops, long n_ops, long k0, long k1, long last, double t0, double h, long *failed_at) {
     long k, j;
     for (k = k0; k < k1; k++) {
+        *failed_at = k;
         double t = t0 + h * (double)k;
         for (j = 0; j < n_ops; j++) {
             const Op *op = &ops[j];
