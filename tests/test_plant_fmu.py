@@ -180,13 +180,10 @@ def test_model_exchange_cvode_matches_co_simulation(plant_fmu: Path, plant_unzip
     np.testing.assert_allclose(me, cs, rtol=0, atol=1e-4)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="RK4 samples the poke's edges at stage times: the Co-Simulation impulse is off by up to "
-    "magnitude*h/6 per edge (8.3e-4 rad/s for the default poke); see the report to the lead",
-)
-def test_model_exchange_matches_co_simulation_with_a_poke(plant_fmu: Path, plant_unzipdir: Path) -> None:
-    start = {"F1": 0.0, "F2": 0.0, "alpha": math.pi + 0.3, "V": 2.0}  # default poke at 1 s
+@pytest.mark.parametrize("poke_start", [1.0, 1.00037])  # edges on and inside a sub-step
+def test_model_exchange_matches_co_simulation_with_a_poke(plant_fmu: Path, plant_unzipdir: Path, poke_start: float) -> None:
+    # The RK4 sub-steps use the poke averaged over each sub-step, so the impulse is exact in CS too.
+    start = {"F1": 0.0, "F2": 0.0, "alpha": math.pi + 0.3, "V": 2.0, "poke_start": poke_start}
     me = model_exchange(plant_fmu, start, 2.0)
     cs = run_cs(plant_unzipdir, np.full(2000, 2.0), start=start)
     np.testing.assert_allclose(me, cs, rtol=0, atol=1e-4)

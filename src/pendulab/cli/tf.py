@@ -55,6 +55,8 @@ def format_zpk(zeros: np.ndarray, poles: np.ndarray, gain: float) -> str:
 
 def run(args: argparse.Namespace) -> int:
     params = plant_parameters_from_args(args)
+    if params.Mp == 0:
+        raise UserError("the cart without a pendulum has no angle to linearize; choose --pendulum long or short")
     plant = linearize(params)
     zeros, poles, gain = plant.zpk(args.output)
     controller = controller_from_args(args)

@@ -138,6 +138,7 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
                     zf.write(path, path.relative_to(root).as_posix())
             zf.comment = (_STAMP + source_hash()).encode()
         target = out_dir / f"{name}.fmu"
+        os.chmod(partial, 0o644)  # mkstemp creates 0600; an FMU is shared like any build product
         os.replace(partial, target)
     return target
 
@@ -157,6 +158,7 @@ def build_helper_library(source: Path) -> Path:
         fd, partial = tempfile.mkstemp(dir=out_dir, suffix=suffix)
         os.close(fd)
         _compile(compiler, [source], [], Path(partial), windows=platform.system() == "Windows")
+        os.chmod(partial, 0o755)
         os.replace(partial, target)
     return target
 

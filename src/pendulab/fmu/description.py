@@ -219,9 +219,14 @@ def variables_header(spec: ModelSpec) -> str:
         out.append(f"#define VR_{v.identifier} {refs[v.name]}  /* {v.type} {v.name} */")
     for name, value in spec.defines.items():
         out.append(f"#define {name} {value}")
-    for base, c_type, array in (("Real", "double", "REAL_START"), ("Integer", "int", "INTEGER_START"), ("Boolean", "int", "BOOLEAN_START")):
-        values = [_c_literal(v.start) for v in spec.variables if v.type == base]
-        out.append(f"static const {c_type} {array}[{max(1, len(values))}] = {{{', '.join(values) or '0'}}};")
+    for base, c_type, prefix in (("Real", "double", "REAL"), ("Integer", "int", "INTEGER"), ("Boolean", "int", "BOOLEAN")):
+        of_type = [v for v in spec.variables if v.type == base]
+        values = [_c_literal(v.start) for v in of_type]
+        size = max(1, len(of_type))
+        out.append(f"static const {c_type} {prefix}_START[{size}] = {{{', '.join(values) or '0'}}};")
+        # Fixed variables (parameters) may only be set before the end of initialization.
+        fixed = ["1" if v.resolved_variability in ("fixed", "constant") else "0" for v in of_type]
+        out.append(f"static const unsigned char {prefix}_FIXED[{size}] = {{{', '.join(fixed) or '0'}}};")
     out.append("#endif")
     return "\n".join(out) + "\n"
 

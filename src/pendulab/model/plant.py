@@ -50,8 +50,28 @@ def _smooth_step(z: ca.SX, width: ca.SX) -> ca.SX:
     return 0.5 * (1 + ca.tanh(z / width))
 
 
+def poke_acceleration(p: dict[str, ca.SX], t: ca.SX) -> ca.SX:
+    """The poke: a rectangular pulse of angular acceleration."""
+    poke_on = ca.logic_and(t >= p["poke_start"], t < p["poke_start"] + p["poke_duration"])
+    return ca.if_else(poke_on, p["poke_magnitude"], 0.0)
+
+
+def mean_poke_acceleration(p: dict[str, ca.SX], t: ca.SX, h: ca.SX) -> ca.SX:
+    """The poke averaged over ``[t, t+h]``: a fixed-step integrator that uses it gets the pulse's
+    impulse exactly, wherever its edges fall inside a step."""
+    start, end = p["poke_start"], p["poke_start"] + p["poke_duration"]
+    overlap = ca.fmax(0.0, ca.fmin(t + h, end) - ca.fmax(t, start))
+    return p["poke_magnitude"] * overlap / h
+
+
 def plant_equations(
-    state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, *, smooth_friction: bool = False
+    state: ca.SX,
+    V: ca.SX,
+    p: dict[str, ca.SX],
+    t: ca.SX,
+    *,
+    smooth_friction: bool = False,
+    poke: ca.SX | None = None,
 ) -> tuple[ca.SX, dict[str, ca.SX]]:
     """The right-hand side of SPEC §2 and the intermediate signals.
 
@@ -67,6 +87,8 @@ def plant_equations(
         Time, for the poke.
     smooth_friction : bool
         Replace the stick-slip switches by steep sigmoids so that the model is differentiable.
+    poke : SX, optional
+        The poke's angular acceleration; default :func:`poke_acceleration` at ``t``.
 
     Returns
     -------
@@ -98,8 +120,8 @@ def plant_equations(
 
     Mc = p["M_cart"] + p["eta_g"] * p["Kg"] ** 2 * p["Jm"] / p["r_mp"] ** 2
     Mp, lp, Ip = p["Mp"], p["lp"], p["Ip"]
-    poke_on = ca.logic_and(t >= p["poke_start"], t < p["poke_start"] + p["poke_duration"])
-    poke = ca.if_else(poke_on, p["poke_magnitude"], 0.0)
+    if poke is None:
+        poke = poke_acceleration(p, t)
 
     cart_force = F - p["Beq"] * xdot - Mp * lp * ca.sin(alpha) * alphadot**2
     gravity_torque = Mp * p["g"] * lp * ca.sin(alpha) - p["Bp"] * alphadot
@@ -232,10 +254,17 @@ def _functions(smooth_friction: bool) -> tuple[ca.Function, ca.Function, ca.Func
     )
     outputs = ca.Function("plant_outputs", [state, V, pvec, t], [measured], ["state", "V", "p", "t"], ["y"])
     h = ca.SX.sym("h")
-    k1 = ode(state, V, pvec, t)
-    k2 = ode(state + h / 2 * k1, V, pvec, t + h / 2)
-    k3 = ode(state + h / 2 * k2, V, pvec, t + h / 2)
-    k4 = ode(state + h * k3, V, pvec, t + h)
+    # RK4 with the poke averaged over the sub-step: the pulse's edges fall anywhere inside a
+    # sub-step, and sampling them at the stage times would get its impulse wrong.
+    poke = mean_poke_acceleration(p, t, h)
+
+    def f(s: ca.SX) -> ca.SX:
+        return plant_equations(s, V, p, t, smooth_friction=smooth_friction, poke=poke)[0]
+
+    k1 = f(state)
+    k2 = f(state + h / 2 * k1)
+    k3 = f(state + h / 2 * k2)
+    k4 = f(state + h * k3)
     stepped = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     rk4 = ca.Function("plant_rk4", [state, V, pvec, t, h], [stepped], ["state", "V", "p", "t", "h"], ["next"])
     return ode, outputs, rk4

@@ -173,16 +173,24 @@ static void refresh(Instance *comp) {
         return fmi2OK;                                                                                    \
     }
 
-#define SETTER(Name, Type, array, count)                                                                   \
+#define SETTER(Name, Type, array, count, fixed)                                                            \
     fmi2Status Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const Type value[]) {     \
         Instance *comp = (Instance *)c;                                                                   \
         size_t k;                                                                                         \
+        int initialized;                                                                                  \
         CHECK(#Name, M(MODE_INSTANTIATED) | M(MODE_INITIALIZATION) | M(MODE_STEP) | M(MODE_EVENT) |      \
                          M(MODE_CONTINUOUS));                                                             \
         if (nvr > 0 && (!vr || !value)) return fmi2Error;                                                 \
+        initialized = comp->mode != MODE_INSTANTIATED && comp->mode != MODE_INITIALIZATION;               \
         for (k = 0; k < nvr; k++) {                                                                       \
             if (vr[k] >= (count)) {                                                                       \
                 fmu_log(comp, fmi2Error, "logStatusError", #Name ": unknown value reference %u", vr[k]);  \
+                return fmi2Error;                                                                         \
+            }                                                                                             \
+            if (initialized && fixed[vr[k]]) {                                                            \
+                fmu_log(comp, fmi2Error, "logStatusError",                                               \
+                        #Name ": value reference %u is a fixed parameter; set it before initialization",  \
+                        vr[k]);                                                                           \
                 return fmi2Error;                                                                         \
             }                                                                                             \
             comp->array[vr[k]] = value[k];                                                                \
@@ -194,9 +202,9 @@ static void refresh(Instance *comp) {
 GETTER(fmi2GetReal, fmi2Real, r, N_REALS)
 GETTER(fmi2GetInteger, fmi2Integer, i, N_INTEGERS)
 GETTER(fmi2GetBoolean, fmi2Boolean, b, N_BOOLEANS)
-SETTER(fmi2SetReal, fmi2Real, r, N_REALS)
-SETTER(fmi2SetInteger, fmi2Integer, i, N_INTEGERS)
-SETTER(fmi2SetBoolean, fmi2Boolean, b, N_BOOLEANS)
+SETTER(fmi2SetReal, fmi2Real, r, N_REALS, REAL_FIXED)
+SETTER(fmi2SetInteger, fmi2Integer, i, N_INTEGERS, INTEGER_FIXED)
+SETTER(fmi2SetBoolean, fmi2Boolean, b, N_BOOLEANS, BOOLEAN_FIXED)
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     Instance *comp = (Instance *)c;
