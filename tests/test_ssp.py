@@ -19,6 +19,7 @@ stage earlier or later in one of them.
 
 from __future__ import annotations
 
+import os
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -121,6 +122,9 @@ def test_the_archive_carries_the_fmus_unchanged(loop, loop_ssp):
 def test_export_is_atomic_and_leaves_no_partial_file(loop, tmp_path):
     target = tmp_path / "out" / "loop.ssp"
     export_ssp(loop, target)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~umask, "normal permissions, like run.mat"
     before = target.read_bytes()
     broken = System(step=H)
     broken.add("plant", tmp_path / "Missing.fmu")

@@ -15,10 +15,9 @@ Examples
 
 from __future__ import annotations
 
-import os
-import tempfile
 import zipfile
 from pathlib import Path
+from typing import BinaryIO
 from xml.sax.saxutils import quoteattr
 
 from fmpy import read_model_description
@@ -105,17 +104,17 @@ def system_structure(system: System, name: str = "pendulab", stop_time: float = 
 
 def export_ssp(system: System, path: str | Path, name: str = "pendulab", stop_time: float = 10.0) -> Path:
     """Write ``system`` with its FMUs to an ``.ssp`` archive (atomically) and return its path."""
+    from pendulab.analysis.results import atomic_write
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, partial = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".part")
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            zf.writestr("SystemStructure.ssd", system_structure(system, name, stop_time))
+    ssd = system_structure(system, name, stop_time)  # reads every FMU first: a bad one fails before any file exists
+
+    def write(f: BinaryIO) -> None:
+        with zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("SystemStructure.ssd", ssd)
             for fmu in dict.fromkeys(c.fmu for c in system.components.values()):
                 zf.write(fmu, f"resources/{fmu.name}")
-        os.replace(partial, path)
-    finally:
-        if os.path.exists(partial):
-            os.unlink(partial)
-    return path
+
+    # The same temporary-then-rename writer as run.mat: normal file permissions, never a partial file.
+    return atomic_write(path, write)
