@@ -103,9 +103,15 @@ def _parse_token(token: str, what: str) -> Number:
     return _finite(value, what, original.strip())
 
 
+#: Largest magnitude of any number (far beyond any controller; keeps |z| and products finite).
+MAX_MAGNITUDE = 1e100
+
+
 def _finite(value: complex, what: str, shown: Any) -> Number:
     if not (math.isfinite(value.real) and math.isfinite(value.imag)):
         raise ControllerError(f"{what}: {_show(shown)} is not finite; every number must be finite")
+    if max(abs(value.real), abs(value.imag)) > MAX_MAGNITUDE:
+        raise ControllerError(f"{what}: {_show(shown)} is too large; every number must be within ±1e100")
     return value if value.imag != 0 else float(value.real)
 
 
@@ -468,9 +474,10 @@ class Controller:
             raise ControllerError("the transfer function's numerator is 0, which switches the controller off; give a non-zero gain")
         if not np.any(den):
             raise ControllerError("the transfer function's denominator is 0; give a valid G(s)")
-        zeros = _clean_roots(np.roots(num))
-        poles = _clean_roots(np.roots(den))
-        gain = num[0] / den[0]
+        zeros = _roots(num, "the transfer function's numerator")
+        poles = _roots(den, "the transfer function's denominator")
+        with np.errstate(all="ignore"):  # an overflow gives inf, which Factor refuses
+            gain = num[0] / den[0]
         return cls.from_zpk(zeros, poles, gain)
 
     @classmethod
@@ -494,18 +501,23 @@ class Controller:
         if kp_ == 0 and ki_ == 0 and kd_ == 0:
             raise ControllerError(f"{what}: all gains are 0, which switches the controller off; give a non-zero Kp, Ki or Kd")
         a = 1.0 / Ti_
+        if not math.isfinite(a):
+            raise ControllerError(f"{what}: Ti is too small (1/Ti overflows); give Ti in seconds, default 0.628")
         # Only the poles of the terms that are present: the common denominator of the others.
         poles = ([-a] if ki_ != 0 else []) + ([-wf_] if kd_ != 0 else [])
         den_i = np.poly([-a]) if ki_ != 0 else np.array([1.0])
         den_d = np.poly([-wf_]) if kd_ != 0 else np.array([1.0])
-        num = np.polyadd(kp_ * np.convolve(den_i, den_d), ki_ * den_d)
-        num = np.polyadd(num, kd_ * wf_ * np.convolve([1.0, 0.0], den_i))
+        with np.errstate(all="ignore"):  # extreme values overflow; checked just below
+            num = np.polyadd(kp_ * np.convolve(den_i, den_d), ki_ * den_d)
+            num = np.polyadd(num, kd_ * wf_ * np.convolve([1.0, 0.0], den_i))
         num = _trim(num)
+        if not np.all(np.isfinite(num)):
+            raise ControllerError(f"{what}: the gains are too large to combine into one transfer function; give smaller values")
         if not np.any(num):
             raise ControllerError(f"{what}: the terms cancel to 0; change the gains")
         if num[-1] == 0:
             raise ControllerError(f"{what}: Kp/Ti + Ki = 0 puts a zero exactly at s = 0 (a pure filtered differentiator); change Kp or Ki")
-        zeros = _clean_roots(np.roots(num))
+        zeros = _roots(num, what)
         return _label_errors("PID", lambda: cls.from_zpk(zeros, poles, num[0]))
 
 
@@ -525,6 +537,18 @@ def _factor_from_mapping(data: Any, label: str, *, gain_required: bool) -> Facto
     if gain_required and "gain" not in data:
         raise ControllerError(f"{label} has no gain; add gain = <non-zero number> (the kernel's gain is required)")
     return _label_errors(label, lambda: Factor(data.get("zeros", ()), data.get("poles", ()), data.get("gain", 1.0), label=label))
+
+
+def _roots(poly: np.ndarray, what: str) -> list[Number]:
+    """Roots of a real polynomial; coefficients too extreme for that are a ControllerError."""
+    try:
+        with np.errstate(all="ignore"):
+            roots = np.roots(poly)
+    except (np.linalg.LinAlgError, ValueError):
+        roots = np.array([np.nan])
+    if not np.all(np.isfinite(roots)):
+        raise ControllerError(f"{what}: the coefficients are too extreme to find the roots; give zeros and poles instead")
+    return _clean_roots(roots)
 
 
 def _trim(poly: np.ndarray) -> np.ndarray:

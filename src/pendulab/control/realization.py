@@ -8,9 +8,12 @@ The controller FMU is a generic discrete LTI block ``x[k+1] = A x[k] + B e[k]``,
    or with two real poles), so no polynomial of degree above 2 is ever formed; the sections keep the
    order of the factors' poles.
 2. Each section is a small, well-scaled state space (second-order ones in a companion form scaled by
-   the natural frequency), and the sections are connected in series: a block lower-triangular ``A``.
-3. The continuous realization is discretized as a whole with the exact Tustin (bilinear) or
-   zero-order-hold formulas (:func:`scipy.signal.cont2discrete`), which keeps the block structure.
+   the natural frequency) with about unit gain, the overall gain spread evenly over the sections,
+   and the sections are connected in series: a block lower-triangular ``A``.
+3. Tustin (bilinear) maps a product to the product of the maps, so each section is discretized on
+   its own and the discrete sections are connected in series. Zero-order hold does not factor: the
+   whole block-triangular realization is discretized at once (matrix exponential). Both are the
+   exact formulas of :func:`scipy.signal.cont2discrete` and keep the block structure.
 
 A single high-order companion form of ``num(s)/den(s)`` is never built: its coefficients lose the
 roots of a high-order controller to round-off.
@@ -195,20 +198,48 @@ def _section_ss(zeros: list[complex], poles: list[complex]) -> tuple[np.ndarray,
     return A, B, C, np.array([[d]])
 
 
-def continuous_realization(controller: Controller) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(A, B, C, D)`` of ``G(s)``: first/second-order sections in series (block lower-triangular ``A``).
+def _section_blocks(controller: Controller) -> list[tuple[np.ndarray, ...]]:
+    """The sections' state spaces, each scaled to about unit gain, the overall gain spread evenly.
 
-    The overall gain is applied at the output.
+    Each section is normalized to gain 1 at its natural frequency (the geometric mean of its poles'
+    magnitudes) and then multiplied by the same share of what is left of the overall gain, so the
+    signal passed from one section to the next keeps a moderate size whatever the roots and gains.
     """
     zeros, poles, gain = controller.zpk()
+    secs = sections(list(zeros), list(poles))
+    if not secs:
+        return []
+    log_norms = []
+    for sz, sp in secs:
+        # Gain at the natural frequency w as if the roots lay at -|r|: never 0 or infinite, even for
+        # roots on the imaginary axis, and close to the true gain for ordinary sections.
+        log_w = float(np.mean([np.log(abs(p)) for p in sp]))
+        size = sum(_log_hypot(log_w, np.log(abs(z))) for z in sz) - sum(_log_hypot(log_w, np.log(abs(p))) for p in sp)
+        log_norms.append(size)
+    share = (np.log(abs(gain)) - sum(log_norms)) / len(secs)
+    blocks = []
+    for i, ((sz, sp), log_norm) in enumerate(zip(secs, log_norms)):
+        A, B, C, D = _section_ss(sz, sp)
+        f = np.exp(share + log_norm)  # this section's factor: its own normalization times the shared gain
+        f = f if i or gain > 0 else -f  # the sign of the gain goes to the first section
+        root = np.sqrt(abs(f))
+        blocks.append((A, B * root, C * (f / root), D * f))
+    return blocks
+
+
+def _log_hypot(log_a: float, log_b: float) -> float:
+    """``log(sqrt(a² + b²))`` from ``log a`` and ``log b`` without overflow."""
+    return float(np.logaddexp(2 * log_a, 2 * log_b) / 2)
+
+
+def _series(blocks: list[tuple[np.ndarray, ...]], D0: float = 1.0) -> tuple[np.ndarray, ...]:
+    """Connect ``u -> block 1 -> block 2 -> ... -> y``: a block lower-triangular state matrix."""
     A = np.zeros((0, 0))
     B = np.zeros((0, 1))
     C = np.zeros((1, 0))
-    D = np.array([[1.0]])
-    for sz, sp in sections(list(zeros), list(poles)):
-        As, Bs, Cs, Ds = _section_ss(sz, sp)
+    D = np.array([[D0]])
+    for As, Bs, Cs, Ds in blocks:
         n, m = A.shape[0], As.shape[0]
-        # Series: u -> (A, B, C, D) -> (As, Bs, Cs, Ds) -> y.
         A_new = np.zeros((n + m, n + m))
         A_new[:n, :n] = A
         A_new[n:, :n] = Bs @ C
@@ -217,7 +248,13 @@ def continuous_realization(controller: Controller) -> tuple[np.ndarray, np.ndarr
         C = np.hstack([Ds @ C, Cs])
         D = Ds @ D
         A = A_new
-    return A, B, gain * C, gain * D
+    return A, B, C, D
+
+
+def continuous_realization(controller: Controller) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C, D)`` of ``G(s)``: first/second-order sections in series (block lower-triangular ``A``)."""
+    blocks = _section_blocks(controller)
+    return _series(blocks, 1.0 if blocks else controller.zpk()[2])
 
 
 def discretize(controller: Any, h: float = 1e-3, method: str = "tustin") -> DiscreteLTI:
@@ -258,10 +295,10 @@ def discretize(controller: Any, h: float = 1e-3, method: str = "tustin") -> Disc
         raise ControllerError(
             f"the controller has order {controller.order} (number of poles); the controller FMU holds at most {MAX_ORDER}: remove poles"
         )
-    A, B, C, D = continuous_realization(controller)
-    n = A.shape[0]
-    if n == 0:
-        return DiscreteLTI(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), D.copy(), h, method)
+    blocks = _section_blocks(controller)
+    if not blocks:
+        D = np.array([[controller.zpk()[2]]])
+        return DiscreteLTI(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), D, h, method)
     if method == "tustin":
         # I - A h/2 is block-triangular: it is singular exactly when a pole sits at s = 2/h.
         for p in controller.zpk()[1]:
@@ -269,9 +306,13 @@ def discretize(controller: Any, h: float = 1e-3, method: str = "tustin") -> Disc
                 raise ControllerError(
                     f"the pole {complex(p).real:g} sits at s = 2/h = {2 / h:g} rad/s, which Tustin cannot map at h={h}; use zoh or move the pole"
                 )
-        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), h, method="bilinear")
+        # The bilinear map of a product is the product of the maps: discretize section by section
+        # (1x1 and 2x2 solves only) and connect the discrete sections in series.
+        Ad, Bd, Cd, Dd = _series([scipy.signal.cont2discrete(block, h, method="bilinear")[:4] for block in blocks])
     else:
-        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), h, method="zoh")
+        # A held input does not factor through the sections: the exponential of the whole
+        # block-triangular realization (scipy: expm of [[A, B], [0, 0]] h).
+        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete(_series(blocks), h, method="zoh")
     arrays = [np.asarray(m, dtype=float) for m in (Ad, Bd, Cd, Dd)]
     if not all(np.all(np.isfinite(m)) for m in arrays):
         raise ControllerError(f"the discretized controller has non-finite entries (poles too fast for h={h}); move fast poles or use a smaller h")
