@@ -71,15 +71,14 @@ def controller_from_args(args: argparse.Namespace) -> Any | None:
     elif args.zeros is not None or args.poles is not None or args.gain is not None:
         if args.gain is None:
             raise UserError("the kernel needs a gain: add --gain K")
-        try:
-            gain = float(args.gain)
-        except ValueError:
-            raise UserError(f"--gain {args.gain!r} is not a number; give e.g. --gain 80") from None
-        base = ctl.Controller([ctl.Factor(ctl.parse_numbers(args.zeros or ""), ctl.parse_numbers(args.poles or ""), gain)])
+        # Kernel and numbered compensators, so that an error names the factor it is about.
+        return ctl.parse_controller(args.zeros or "", args.poles or "", args.gain, args.compensator)
     else:
         return None
     if args.compensator:
-        base = ctl.Controller([*base.factors, *(ctl.parse_compensator(c) for c in args.compensator)])
+        first = len(base.factors)
+        extra = [ctl.parse_compensator(c, f"compensator {first + i}") for i, c in enumerate(args.compensator)]
+        base = ctl.Controller([*base.factors, *extra])
     return base
 
 
