@@ -225,6 +225,11 @@ def test_other_master_mistakes_are_user_errors(plant_fmu, tmp_path):
     missing.add("plant", tmp_path / "Missing.fmu")
     with pytest.raises(UserError, match="does not exist"):
         Master(missing)
+    (tmp_path / "Text.fmu").write_text("not a zip")
+    not_zip = System()
+    not_zip.add("plant", tmp_path / "Text.fmu")
+    with pytest.raises(UserError, match="not an FMU"):
+        Master(not_zip)
     with Master(plant_system(plant_fmu)) as master, pytest.raises(UserError, match="at least one step"):
         master.run(0.0004, ["plant.x"])
 
@@ -257,6 +262,10 @@ def test_master_frees_its_instances_and_folders(plant_fmu):
     master = Master(plant_system(plant_fmu))
     folders = list(master._tmp_dirs)
     assert folders and all(Path(d).is_dir() for d in folders)
+    # Only what a run needs is unpacked: no sources, no other platform's binary.
+    unpacked = {p.relative_to(folders[0]).parts[0] for p in Path(folders[0]).rglob("*")}
+    assert "sources" not in unpacked and {"binaries", "modelDescription.xml"} <= unpacked
+    assert len(list(Path(folders[0], "binaries").iterdir())) == 1
     with master:
         master.run(0.01, ["plant.x"])
     assert not master.instances and not any(Path(d).exists() for d in folders)
