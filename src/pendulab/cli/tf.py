@@ -9,7 +9,6 @@ import numpy as np
 
 from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
 from pendulab.errors import UserError
-from pendulab.model.linear import linearize
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -57,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
     params = plant_parameters_from_args(args)
     if params.Mp == 0:
         raise UserError("the cart without a pendulum has no angle to linearize; choose --pendulum long or short")
+    from pendulab.model.linear import linearize  # imports python-control: only when needed
+
     plant = linearize(params)
     zeros, poles, gain = plant.zpk(args.output)
     controller = controller_from_args(args)

@@ -38,7 +38,6 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
-import control
 import numpy as np
 
 from pendulab.errors import ControllerError
@@ -271,7 +270,9 @@ class Factor:
         """Real monic polynomial ``prod(s - p)``, highest power first."""
         return _real_poly(self.poles)
 
-    def transfer_function(self) -> control.TransferFunction:
+    def transfer_function(self) -> "control.TransferFunction":  # noqa: F821
+        import control  # python-control costs a second to import: only where it is used
+
         return control.tf(self.numerator(), self.denominator())
 
     def to_dict(self) -> dict[str, Any]:
@@ -370,8 +371,10 @@ class Controller:
         gain = float(np.prod([f.gain for f in self.factors]))
         return _real_if_real(zeros), _real_if_real(poles), gain
 
-    def transfer_function(self) -> control.TransferFunction:
+    def transfer_function(self) -> "control.TransferFunction":  # noqa: F821
         """The product as one ``control.TransferFunction`` (continuous time)."""
+        import control
+
         num, den = np.array([1.0]), np.array([1.0])
         for f in self.factors:
             num, den = np.convolve(num, f.numerator()), np.convolve(den, f.denominator())
@@ -454,6 +457,8 @@ class Controller:
 
         A ``control.StateSpace`` is accepted too. Roots are computed from the polynomials.
         """
+        import control
+
         if isinstance(tf, control.StateSpace):
             tf = control.tf(tf)
         if not isinstance(tf, control.TransferFunction):

@@ -39,9 +39,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import control
 import numpy as np
-import scipy.signal
+import scipy.linalg
 
 from pendulab.control.controller import Controller, Number
 from pendulab.errors import ControllerError
@@ -96,9 +95,11 @@ class DiscreteLTI:
             x = A @ x + B * uk
         return y
 
-    def transfer_function(self) -> control.TransferFunction:
+    def transfer_function(self) -> "control.TransferFunction":  # noqa: F821
         """The discrete transfer function (for comparisons; the realization itself is what the FMU runs)."""
         if self.order == 0:
+            import control
+
             return control.tf([float(self.D[0, 0])], [1.0], self.h)
         return control.tf(control.ss(self.A, self.B, self.C, self.D, self.h))
 
@@ -276,6 +277,8 @@ def discretize(controller: Any, h: float = 1e-3, method: str = "tustin") -> Disc
         Order above 16, a bad ``h`` or ``method``, or a pole Tustin cannot map (at ``s = 2/h``).
     """
     if not isinstance(controller, Controller):
+        import control  # only for a python-control object (importing it costs a second)
+
         if isinstance(controller, (control.TransferFunction, control.StateSpace)):
             controller = Controller.from_transfer_function(controller)
         else:
@@ -308,13 +311,36 @@ def discretize(controller: Any, h: float = 1e-3, method: str = "tustin") -> Disc
                 )
         # The bilinear map of a product is the product of the maps: discretize section by section
         # (1x1 and 2x2 solves only) and connect the discrete sections in series.
-        Ad, Bd, Cd, Dd = _series([scipy.signal.cont2discrete(block, h, method="bilinear")[:4] for block in blocks])
+        Ad, Bd, Cd, Dd = _series([_bilinear(*block, h) for block in blocks])
     else:
         # A held input does not factor through the sections: the exponential of the whole
         # block-triangular realization (scipy: expm of [[A, B], [0, 0]] h).
-        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete(_series(blocks), h, method="zoh")
+        Ad, Bd, Cd, Dd = _zero_order_hold(*_series(blocks), h)
     arrays = [np.asarray(m, dtype=float) for m in (Ad, Bd, Cd, Dd)]
     if not all(np.all(np.isfinite(m)) for m in arrays):
         raise ControllerError(f"the discretized controller has non-finite entries (poles too fast for h={h}); move fast poles or use a smaller h")
     return DiscreteLTI(*arrays, h=h, method=method)
 
+
+
+# The formulas of scipy.signal.cont2discrete, here so that the command line need not import
+# scipy.signal (most of a second) for two small matrix operations.
+def _bilinear(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
+    """Tustin (bilinear) discretization of a state-space block."""
+    eye = np.eye(A.shape[0])
+    ima = eye - 0.5 * h * A
+    Ad = np.linalg.solve(ima, eye + 0.5 * h * A)
+    Bd = np.linalg.solve(ima, h * B)
+    Cd = np.linalg.solve(ima.T, C.T).T
+    Dd = D + 0.5 * (C @ Bd)
+    return Ad, Bd, Cd, Dd
+
+
+def _zero_order_hold(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
+    """Zero-order-hold discretization: the exponential of ``[[A, B], [0, 0]] h``."""
+    n, m = A.shape[0], B.shape[1]
+    block = np.zeros((n + m, n + m))
+    block[:n, :n] = A
+    block[:n, n:] = B
+    exp = scipy.linalg.expm(block * h)
+    return exp[:n, :n], exp[:n, n:], C, D
