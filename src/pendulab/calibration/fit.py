@@ -1,0 +1,471 @@
+"""Least-squares refit of the friction vector, ``Beq`` and the force gain from logs (SPEC §8).
+
+The logged voltage is replayed through the CasADi plant with the smoothed friction model
+(``PlantModel(smooth_friction=True)``: the stick-slip switches become steep sigmoids so that the
+problem is differentiable) and the parameters are chosen to minimize the squared error to the logged
+positions (and angles, for logs with the pendulum).
+
+Method
+------
+*Multiple shooting.* The log is cut into shooting intervals of ``interval`` seconds (10 ms). The
+state at the start of every interval is a decision variable, initialized from the smoothed log; one
+interval integrates the logged samples with RK4 (sub-steps of at most ``max_substep``) inside one
+CasADi function, applied to all intervals at once with ``map``. Continuity between intervals is an
+equality constraint. IPOPT (through ``nlpsol``) solves the problem with a Gauss-Newton Hessian
+(``J^T J`` of the residuals; supplied as ``hess_lag``), which is what makes a 60 s log at 1 kHz
+take seconds rather than minutes.
+
+*Scaling.* Each fitted parameter is a decision variable divided by its starting value (or a typical
+size where that is 0), so all are of order 1.
+
+*A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
+standard deviation of 100 % of the starting value (in units of the measurement noise). It keeps
+parameters that the logs cannot show (``F2`` or ``v1`` on some logs) at their starting values and
+moves identifiable ones by far less than their uncertainty.
+
+*Uncertainty.* With the solution's residuals ``r`` (``N`` samples, ``n`` parameters) and the
+sensitivities ``J = dr/dp`` of the continuous (single-shooting) trajectory,
+``cov = (J^T J)^-1 * sigma^2`` with ``sigma^2 = r^T r / (N - n)``; the reported uncertainty is the
+square root of its diagonal.
+
+Examples
+--------
+>>> from pendulab.calibration.rig import VirtualRig
+>>> from pendulab.calibration.ramp import run_ramp_test
+>>> from pendulab.model.parameters import PlantParameters
+>>> true = PlantParameters.preset("none", Beq=5.0, force_gain=0.9)
+>>> with VirtualRig(true) as rig:
+...     log = run_ramp_test(rig, iterations=1)
+>>> result = fit_parameters([log], PlantParameters.preset("none"))   # doctest: +SKIP
+>>> round(result.values["Beq"], 1), round(result.values["force_gain"], 2)  # doctest: +SKIP
+(5.0, 0.9)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import casadi as ca
+import numpy as np
+
+from pendulab.calibration.files import FITTED_NAMES, Calibration
+from pendulab.calibration.logs import RampLog
+from pendulab.errors import CalibrationError
+from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
+from pendulab.model.plant import PlantModel
+
+#: What ``fit_parameters`` fits by default.
+DEFAULT_FIT = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
+FITTABLE = (*FRICTION_NAMES, *FITTED_NAMES)
+# Typical sizes (scaling where the starting value is 0) and bounds of the fitted parameters.
+_TYPICAL = {"F1": 1.0, "v1": 0.005, "F2": 1.0, "v2": 0.05, "B": 10.0, "Beq": 1.0, "force_gain": 1.0, "M_cart": 0.5}
+_LOWER = {"F1": 0.0, "v1": 1e-4, "F2": 0.0, "v2": 1e-3, "B": 0.0, "Beq": 0.0, "force_gain": 0.05, "M_cart": 0.05}
+_UPPER = {"F1": 50.0, "v1": 1.0, "F2": 50.0, "v2": 2.0, "B": 2000.0, "Beq": 200.0, "force_gain": 10.0, "M_cart": 20.0}
+
+
+@dataclass(frozen=True)
+class FitCurve:
+    """Measured and refitted motion of one log (for the plot)."""
+
+    source: str
+    t: np.ndarray
+    V: np.ndarray
+    x_measured: np.ndarray
+    x_fitted: np.ndarray  # the fit's trajectory (smoothed friction, position pinned at rests)
+    x_simulated: np.ndarray  # the plant with the fitted parameters, free-running over the log
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Outcome of :func:`fit_parameters`.
+
+    Attributes
+    ----------
+    values, initial, uncertainty : dict
+        Fitted value, starting value and standard uncertainty of each fitted parameter.
+    residual_rms : float
+        RMS of the position residual at the solution (m).
+    params : PlantParameters
+        ``params0`` with the fitted values.
+    """
+
+    names: tuple[str, ...]
+    values: dict[str, float]
+    initial: dict[str, float]
+    uncertainty: dict[str, float]
+    residual_rms: float
+    params: PlantParameters
+    n_samples: int
+    n_intervals: int
+    iterations: int
+    success: bool
+    status: str
+    seconds: float
+    curves: tuple[FitCurve, ...] = field(default=(), repr=False)
+
+    def to_calibration(self, **metadata: Any) -> Calibration:
+        """A calibration file's content: the full friction vector (fitted or kept) and the fitted extras."""
+        p = self.params
+        record = {
+            "method": "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction)",
+            "fitted": list(self.names),
+            "uncertainty": self.uncertainty,
+            "initial": self.initial,
+            "residual_rms_m": self.residual_rms,
+            "samples": self.n_samples,
+            "solver_status": self.status,
+        }
+        record.update(metadata)
+        extras = {n: getattr(p, n) for n in FITTED_NAMES if n in self.names}
+        return Calibration(friction=p.friction, metadata=record, **extras)
+
+    def summary(self) -> str:
+        lines = [f"{'name':<11}{'start':>11}{'fitted':>11}{'± (1 sigma)':>13}"]
+        for name in self.names:
+            lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}{self.uncertainty[name]:>13.2g}")
+        lines.append(
+            f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
+            f"{self.iterations} IPOPT iterations, {self.seconds:.2f} s ({self.status})"
+        )
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------- the fit's model
+#: Widths of the smoothed stick-slip switches, relative to the thresholds they smooth.
+STICK_SPEED_WIDTH = 0.1  # x v1
+SLIP_SPEED_WIDTH = 0.02  # x v2
+FORCE_WIDTH = 0.01  # x F1, F2
+
+
+@lru_cache(maxsize=None)
+def fit_model() -> tuple[ca.Function, ca.Function]:
+    """``(ode, rk4)`` of the plant with the friction law smoothed for fitting.
+
+    The equations are :func:`pendulab.model.plant.plant_equations`; only its friction force node is
+    replaced (``casadi.graph_substitute``) by a smoothed stick-slip law whose switch widths scale with
+    the thresholds (``0.25 v1``, ``0.1 v2``, ``0.02 F1``, ``0.02 F2``). The fixed widths of
+    ``smooth_friction=True`` (2 mm/s on the speed) are comparable to ``v1`` itself: with them a cart
+    pushed by 90 % of ``F1`` does not stay stuck but creeps and breaks away, which biases a fit of
+    ``F1`` and of everything after a breakaway.
+    """
+    from pendulab.model.plant import plant_equations
+
+    names = PlantParameters.names()
+    state, V, pvec, t = ca.MX.sym("state", 4), ca.MX.sym("V"), ca.MX.sym("p", len(names)), ca.MX.sym("t")
+    p = {name: pvec[i] for i, name in enumerate(names)}
+    derivative, signals = plant_equations(state, V, p, t, smooth_friction=False)
+    F_motor, xdot = signals["F_motor"], state[1]
+
+    def step(z: ca.MX) -> ca.MX:
+        return 0.5 * (1 + ca.tanh(z))
+
+    speed = ca.sqrt(xdot**2 + (0.01 * p["v1"]) ** 2 + 1e-12)
+    force = ca.sqrt(F_motor**2 + (0.01 * p["F1"]) ** 2 + 1e-12)
+    stick = step((p["v1"] - speed) / (STICK_SPEED_WIDTH * p["v1"] + 1e-6)) * step((p["F1"] - force) / (FORCE_WIDTH * p["F1"] + 1e-3))
+    slip = step((p["v2"] - speed) / (SLIP_SPEED_WIDTH * p["v2"] + 1e-6)) * step((p["F2"] - force) / (FORCE_WIDTH * p["F2"] + 1e-3))
+    friction = -stick * F_motor - (1 - stick) * slip * p["B"] * xdot
+    derivative = ca.graph_substitute(derivative, [signals["F_friction"]], [friction])
+    ode = ca.Function("fit_ode", [state, V, pvec, t], [derivative]).expand()
+    s, u, pp, tt, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("p", len(names)), ca.SX.sym("t"), ca.SX.sym("h")
+    k1 = ode(s, u, pp, tt)
+    k2 = ode(s + h / 2 * k1, u, pp, tt + h / 2)
+    k3 = ode(s + h / 2 * k2, u, pp, tt + h / 2)
+    k4 = ode(s + h * k3, u, pp, tt + h)
+    rk4 = ca.Function("fit_rk4", [s, u, pp, tt, h], [s + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+    return ode, rk4
+
+
+def _noise_level(x: np.ndarray) -> float:
+    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
+    d2 = np.diff(x, 2)
+    dx = np.abs(np.diff(x))
+    steps = dx[dx > 1e-12]
+    q = float(np.min(steps)) if steps.size else 0.0
+    return max(float(np.std(d2)) / math.sqrt(6), q / math.sqrt(12), 1e-7)
+
+
+def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
+    """Smoothed positions and speeds (and angles) at every sample, ``(n, n_states)``."""
+    from scipy.signal import savgol_filter
+
+    n = len(log)
+    window = min(31, n - (1 - n % 2))
+    window = window if window % 2 else window - 1
+    dt = log.period
+    if window >= 5:
+        x = savgol_filter(log.x, window, 3)
+        v = savgol_filter(log.x, window, 3, deriv=1, delta=dt)
+    else:
+        x, v = log.x.copy(), np.gradient(log.x, log.t)
+    columns = [x, v]
+    if with_pendulum:
+        alpha = log.alpha if log.alpha is not None else np.zeros(n)
+        if window >= 5:
+            columns += [savgol_filter(alpha, window, 3), savgol_filter(alpha, window, 3, deriv=1, delta=dt)]
+        else:
+            columns += [alpha, np.gradient(alpha, log.t)]
+    return np.column_stack(columns)
+
+
+def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: Callable[[RampLog], int]) -> None:
+    if not logs:
+        raise CalibrationError("no log to fit; give at least one log file")
+    for log in logs:
+        where = f"log {log.source}" if log.source else "log"
+        M = interval_samples(log)
+        if len(log) < 2 * M + 1:
+            raise CalibrationError(
+                f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two shooting intervals "
+                "and should contain the cart breaking away and moving"
+            )
+        if np.ptp(log.x) < 1e-4:
+            raise CalibrationError(
+                f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um); a fit needs a log where it breaks away and moves"
+            )
+        if np.ptp(log.V) == 0:
+            raise CalibrationError(f"{where}: the voltage is constant; a fit needs the logged voltage ramps")
+        if with_pendulum and log.alpha is None:
+            raise CalibrationError(f"{where} has no alpha column; fitting with a pendulum needs the logged angle (or use --pendulum none)")
+        steps = np.diff(log.t)
+        if np.max(steps) > 1.5 * np.min(steps):
+            raise CalibrationError(
+                f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms; resample it to a fixed period"
+            )
+
+
+# ---------------------------------------------------------------------- the fit
+#: Default process noise per shooting interval (x m, xdot m/s, alpha rad, alphadot rad/s).
+PROCESS_NOISE = (5e-6, 5e-4, 5e-5, 5e-3)
+
+
+def fit_parameters(
+    logs: Iterable[RampLog],
+    params0: PlantParameters | None = None,
+    fit: Sequence[str] = DEFAULT_FIT,
+    fit_mass: bool = False,
+    *,
+    interval: float = 0.01,
+    max_substep: float = 1e-3,
+    process_noise: Sequence[float] = PROCESS_NOISE,
+    regularization: float = 1.0,
+    max_iter: int = 60,
+    tolerance: float = 1e-6,
+    compile: bool | None = None,
+    on_progress: Callable[[str], None] | None = None,
+    verbose: bool = False,
+) -> FitResult:
+    """Fit parameters of the plant to logged runs by least squares (see the module docstring).
+
+    Parameters
+    ----------
+    logs : iterable of RampLog
+        One or more logs (ramp tests or closed-loop runs) at a fixed sample period.
+    params0 : PlantParameters
+        Starting values and every parameter that is not fitted (pendulum, motor, ...); default
+        IP02 cart with the pendulum removed (ramp-test logs).
+    fit : sequence of str
+        Names to fit, among ``F1 v1 F2 v2 B Beq force_gain M_cart``.
+    fit_mass : bool
+        Also fit ``M_cart``.
+    interval : float
+        Shooting interval (s).
+    max_substep : float
+        Largest RK4 step inside the fit (s); the logged period is split into equal sub-steps.
+    process_noise : sequence of 4 floats
+        Standard deviation of the model error per interval for ``x, xdot, alpha, alphadot``: the
+        weight of the continuity defects.
+    regularization : float
+        Weight of the weak prior towards ``params0`` (0 switches it off).
+    compile : bool, optional
+        Compile the interval functions to C (cached per machine); default: when a compiler exists.
+
+    Returns
+    -------
+    FitResult
+    """
+    from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
+
+    t_start = time.perf_counter()
+    progress = on_progress or (lambda text: None)
+    logs = list(logs)
+    params0 = params0 or PlantParameters.preset("none")
+    names = tuple(dict.fromkeys([*fit, *(["M_cart"] if fit_mass else [])]))
+    unknown = [n for n in names if n not in FITTABLE]
+    if unknown:
+        raise CalibrationError(f"cannot fit {unknown[0]!r}; choose among {', '.join(FITTABLE)}")
+    if not names:
+        raise CalibrationError("nothing to fit; name at least one parameter")
+    with_pendulum = params0.Mp > 0
+    ns = 4 if with_pendulum else 2
+    all_names = PlantParameters.names()
+    fitted_idx = tuple(all_names.index(n) for n in names)
+    p0 = np.asarray(params0.as_vector(), dtype=float)
+    start = np.array([getattr(params0, n) for n in names])
+    scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start)])
+    theta0 = start / scales
+
+    def samples_per_interval(log: RampLog) -> int:
+        return max(1, int(round(interval / log.period)))
+
+    _check_logs(logs, with_pendulum, samples_per_interval)
+    defect_sigma = np.asarray(process_noise, dtype=float)[:ns]
+
+    progress("preparing the shooting functions" + (" (compiling once per machine)" if compile is not False else ""))
+    functions: dict[tuple[int, int], IntervalFunctions] = {}
+    blocks: list[LogBlock] = []
+    offset_w, offset_r = len(names), 0
+    for log in logs:
+        M = samples_per_interval(log)
+        n_sub = max(1, int(math.ceil(log.period / max_substep - 1e-9)))
+        if (M, n_sub) not in functions:
+            functions[M, n_sub] = IntervalFunctions(fit_model()[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, compile)
+        used = ((len(log) - 1) // M) * M + 1
+        sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
+        nodes0 = _initial_states(log, with_pendulum)[:used:M]
+        block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
+        blocks.append(block)
+        offset_w += block.n_w
+        offset_r += block.n_r
+    problem = Problem(blocks, len(names), scales, theta0, regularization)
+    compiled = all(f.compiled for f in functions.values())
+
+    # IPOPT sees 1/2 |r(w)|^2 with the gradient J^T r and the Gauss-Newton Hessian J^T J.
+    w, r_jac, J = problem.w, problem.residuals_jac, problem.jacobian
+    p_none = ca.MX(0, 1)
+    grad_f = ca.Function("fit_grad_f", [w, p_none], [0.5 * ca.sumsqr(r_jac), ca.mtimes(J.T, r_jac)], ["x", "p"], ["f", "grad_f_x"])
+    lam_f = ca.MX.sym("lam_f")
+    theta = w[: len(names)]
+
+    def value_of(name: str) -> ca.MX | float:
+        return theta[names.index(name)] * scales[names.index(name)] if name in names else getattr(params0, name)
+
+    order = [value_of(high) - value_of(low) for low, high in (("F1", "F2"), ("v1", "v2")) if low in names or high in names]
+    g = ca.vertcat(*order) if order else ca.MX(0, 1)
+    lam_g = ca.MX.sym("lam_g", g.shape[0])
+    hess_lag = ca.Function(
+        "fit_gauss_newton", [w, p_none, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
+        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
+    )
+    options = {
+        "grad_f": grad_f,
+        "hess_lag": hess_lag,
+        "print_time": bool(verbose),
+        "calc_lam_p": False,
+        "calc_lam_x": False,
+        "no_nlp_grad": True,
+        "ipopt": {"max_iter": max_iter, "tol": tolerance, "acceptable_tol": 1e-1, "print_level": 5 if verbose else 0, "sb": "yes", "mu_init": 1e-4, "mu_strategy": "adaptive",
+                  "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-9},
+    }
+    x0 = np.concatenate([theta0] + [b.nodes0.ravel() for b in blocks])
+    lbx = np.concatenate([np.array([_LOWER[n] for n in names]) / scales, np.full(problem.n_w - len(names), -np.inf)])
+    ubx = np.concatenate([np.array([_UPPER[n] for n in names]) / scales, np.full(problem.n_w - len(names), np.inf)])
+    n_samples = sum(b.used for b in blocks)
+    n_intervals = sum(b.N for b in blocks)
+    progress(
+        f"fitting {', '.join(names)} to {len(logs)} log(s): {n_samples} samples, {n_intervals} shooting intervals"
+        + ("" if compiled else " (no C compiler: evaluating in CasADi's virtual machine, slower)")
+    )
+    solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
+    solution = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.zeros(g.shape[0]), ubg=np.full(g.shape[0], np.inf))
+    stats = solver.stats()
+    w_opt = np.asarray(solution["x"]).ravel()
+    values = {n: float(v * s) for n, v, s in zip(names, w_opt[: len(names)], scales)}
+    params = params0.with_values(**values)
+    progress(f"IPOPT: {stats.get('return_status')} after {stats.get('iter_count')} iterations")
+
+    # Residuals, uncertainty and the curves at the solution.
+    at_solution = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])(w_opt)
+    r_opt, J_opt = np.asarray(at_solution[0]).ravel(), at_solution[1]
+    outputs = [np.asarray(y) for y in at_solution[2:]]
+    uncertainty = _uncertainty(problem, r_opt, J_opt)
+    errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
+    rms = float(np.sqrt(np.mean(errors**2)))
+    curves = []
+    _, nodes = problem.split(w_opt)
+    for y, b, S in zip(outputs, blocks, nodes):
+        x0_state = np.r_[S[:, 0], np.zeros(4 - ns)]
+        simulated = _simulate_plant(b.log, params, x0_state)[: b.used]
+        fitted = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()]
+        curves.append(FitCurve(b.log.source or "log", b.log.t[: b.used], b.log.V[: b.used], b.log.x[: b.used], fitted, simulated))
+    return FitResult(
+        names=names,
+        values=values,
+        initial={n: float(v) for n, v in zip(names, start)},
+        uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
+        residual_rms=rms,
+        params=params,
+        n_samples=n_samples,
+        n_intervals=n_intervals,
+        iterations=int(stats.get("iter_count", -1)),
+        success=bool(stats.get("success", False)),
+        status=str(stats.get("return_status", "unknown")),
+        seconds=time.perf_counter() - t_start,
+        curves=tuple(curves),
+    )
+
+
+def _uncertainty(problem, r: np.ndarray, J: ca.DM) -> np.ndarray:
+    """Standard uncertainty of the scaled parameters: ``sqrt(diag((J^T J)^-1)) * sigma``.
+
+    ``J`` holds every residual (samples, continuity defects, prior) against every unknown (the
+    parameters and the shooting nodes); the parameters' block of ``(J^T J)^-1`` is their
+    covariance with the nodes eliminated. ``sigma^2 = r^T r / (N - n)`` rescales the assumed noise.
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    sparsity = J.sparsity()
+    Js = sp.csc_matrix((np.asarray(J.nonzeros()), sparsity.row(), sparsity.colind()), shape=J.shape)
+    JTJ = (Js.T @ Js).tocsc()
+    nt = problem.nt
+    rhs = np.zeros((problem.n_w, nt))
+    rhs[np.arange(nt), np.arange(nt)] = 1.0
+    dof = max(len(r) - problem.n_w, 1)
+    sigma2 = float(r @ r) / dof
+    try:
+        solved = spla.splu(JTJ).solve(rhs)
+    except RuntimeError:  # singular: a parameter the logs cannot show, and no prior
+        return np.full(nt, np.inf)
+    return np.sqrt(np.clip(np.diag(solved[:nt, :nt]) * sigma2, 0, None))
+
+
+def _simulate_plant(log: RampLog, params: PlantParameters, x0: np.ndarray) -> np.ndarray:
+    """Positions of the plant (switching friction, as ``pendulab simulate`` uses it) replaying the log."""
+    from pendulab.calibration._simulation import simulate
+
+    return simulate(params, log.V[:-1], log.period, x0, t0=float(log.t[0]))[:, 0]
+
+
+def plot_fit(result: FitResult, path: str | Path) -> Path:
+    """PNG of measured against refitted (and starting) motion, one panel pair per log."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    curves = result.curves
+    fig, axes = plt.subplots(2 * len(curves), 1, figsize=(10, 3.2 * 2 * len(curves)), sharex=False, squeeze=False)
+    for i, curve in enumerate(curves):
+        ax_x, ax_v = axes[2 * i, 0], axes[2 * i + 1, 0]
+        ax_x.plot(curve.t, curve.x_measured * 1e3, color="k", lw=1.2, label="measured")
+        ax_x.plot(curve.t, curve.x_fitted * 1e3, color="tab:red", lw=1.0, ls="--", label="refitted model")
+        ax_x.plot(curve.t, curve.x_simulated * 1e3, color="tab:blue", lw=0.8, ls=":", label="plant simulated with the fitted values")
+        ax_x.set_ylabel("x (mm)")
+        ax_x.set_title(f"{Path(curve.source).name}: measured vs refitted motion")
+        ax_x.legend(loc="best", fontsize=8)
+        ax_v.plot(curve.t, curve.V, color="tab:blue", lw=0.8)
+        ax_v.set_ylabel("V (V)")
+        ax_v.set_xlabel("t (s)")
+    text = ", ".join(f"{n}={result.values[n]:.4g}±{result.uncertainty[n]:.2g}" for n in result.names)
+    fig.suptitle(text, fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,251 @@
+"""The ramp test (SPEC §8): find where the cart breaks away, how it slows down and sticks again.
+
+One iteration, for each direction (+ then -):
+
+1. **centre** the cart: a P loop on the position (with a slow integral that breaks stiction) until the
+   cart rests within ``centre_tolerance`` of 0;
+2. **slow ramp**: the voltage rises from 0 at ``ramp_rate`` until the cart breaks away (``F1``) and
+   then moves ``motion_distance`` freely;
+3. **release**: the voltage drops to 0 and the cart coasts to a stop; the decay of its speed gives
+   ``v2``, ``B`` and ``v1``;
+4. **probe**: a steep ramp (``probe_rate``) from rest to ``probe_factor`` times the breakaway
+   voltage, held until the cart has moved ``probe_distance``, then released. A slow ramp leaves the
+   strong-drag regime by speed (``v2``) before the force reaches ``F2``; only a force that rises
+   faster than the cart can follow shows ``F2``, "the force above which motion is smooth".
+
+Each iteration is announced through ``on_iteration(i, n)``. Whenever the cart passes
+``track_limit`` the voltage drops to 0 and the next centring backs it off. Ctrl-C (or any
+``KeyboardInterrupt``, also from a callback) switches the motor off and returns what was measured
+(``log.interrupted`` is then true).
+
+Examples
+--------
+>>> from pendulab.calibration.rig import VirtualRig
+>>> from pendulab.calibration.ramp import run_ramp_test
+>>> with VirtualRig(x0=0.04) as rig:
+...     log = run_ramp_test(rig, iterations=1)
+>>> log.duration > 5, log.interrupted
+(True, False)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from pendulab.calibration.logs import RampLog
+from pendulab.calibration.rig import Rig
+from pendulab.errors import CalibrationError
+
+
+@dataclass(frozen=True)
+class RampSettings:
+    """Knobs of the ramp test (SI units: V, V/s, m, s)."""
+
+    ramp_rate: float = 1.0
+    probe_rate: float = 100.0
+    probe_factor: float = 2.5
+    max_voltage: float = 6.0
+    motion_distance: float = 0.08
+    probe_distance: float = 0.03
+    breakaway_distance: float = 1e-4
+    track_limit: float = 0.30
+    centre_tolerance: float = 0.01
+    centre_gain: float = 200.0
+    centre_integral: float = 400.0
+    centre_max_voltage: float = 3.0
+    still_time: float = 0.3
+    still_band: float = 1e-5  # less than one IP02 encoder step: 'still' means no count for still_time
+    phase_timeout: float = 15.0
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise CalibrationError(f"ramp setting {name}={value!r} must be a positive number")
+
+
+class _Stopped(Exception):
+    """A phase could not finish (timeout); the iteration goes on with the next phase."""
+
+
+class _Run:
+    """Bookkeeping of one ramp test: applies voltages, records the log, checks the track limits."""
+
+    def __init__(self, rig: Rig, settings: RampSettings, progress: Callable[[str], None]) -> None:
+        self.rig, self.s, self.progress = rig, settings, progress
+        self.t: list[float] = []
+        self.V: list[float] = []
+        self.x: list[float] = []
+        self.events: list[tuple[float, str]] = []
+        self.position = rig.reset()
+
+    def note(self, text: str) -> None:
+        self.events.append((self.rig.time, text))
+
+    def apply(self, voltage: float) -> float:
+        """Record ``(t, V, x)`` and apply ``voltage`` for one period; returns the new position."""
+        self.t.append(self.rig.time)
+        self.V.append(voltage)
+        self.x.append(self.position)
+        self.position = self.rig.step(voltage)
+        return self.position
+
+    def beyond_limit(self, voltage: float) -> bool:
+        """The cart is past a track limit and ``voltage`` would push it further."""
+        x = self.position
+        return abs(x) >= self.s.track_limit and np.sign(voltage) == np.sign(x)
+
+    def steps(self, seconds: float) -> int:
+        return max(1, int(round(seconds / self.rig.period)))
+
+    def is_still(self) -> bool:
+        n = self.steps(self.s.still_time)
+        if len(self.x) < n:
+            return False
+        recent = self.x[-n:] + [self.position]
+        return max(recent) - min(recent) <= self.s.still_band
+
+    def wait_still(self) -> None:
+        """Motor off until the cart has not moved for ``still_time``."""
+        for _ in range(self.steps(self.s.phase_timeout)):
+            self.apply(0.0)
+            if self.is_still():
+                return
+        self.note("timeout waiting for the cart to stop")
+        raise _Stopped
+
+    def centre(self) -> None:
+        """P loop on x, with an integral that only acts while the cart is stuck off centre."""
+        s, dt = self.s, self.rig.period
+        integral = 0.0
+        for _ in range(self.steps(s.phase_timeout)):
+            x = self.position
+            if abs(x) <= s.centre_tolerance:
+                integral = 0.0
+                voltage = 0.0
+                if self.is_still():
+                    self.note(f"centred at x={x * 1e3:.2f} mm")
+                    return
+            else:
+                integral += x * dt
+                voltage = float(np.clip(-s.centre_gain * x - s.centre_integral * integral, -s.centre_max_voltage, s.centre_max_voltage))
+            self.apply(voltage)
+        self.note("timeout centring the cart")
+        raise CalibrationError(
+            f"the cart could not be centred within {s.phase_timeout:g} s (x={self.position * 1e3:.1f} mm); check the rig"
+        )
+
+    def ramp(self, direction: int, rate: float, target: float, distance: float) -> float | None:
+        """Ramp at ``rate`` towards ``direction*target``; stop after moving ``distance`` past breakaway.
+
+        Returns the voltage at breakaway (``None`` if the cart never moved).
+        """
+        s, dt = self.s, self.rig.period
+        start = self.position
+        breakaway_at: float | None = None
+        voltage = 0.0
+        held = 0
+        for _ in range(self.steps(s.phase_timeout)):
+            voltage = direction * min(abs(voltage) + rate * dt, target)
+            if self.beyond_limit(voltage):
+                self.note(f"track limit at x={self.position * 1e3:.1f} mm: voltage off")
+                break
+            x = self.apply(voltage)
+            moved = direction * (x - start)
+            if breakaway_at is None and moved >= s.breakaway_distance:
+                breakaway_at = voltage
+                self.note(f"breakaway {'+' if direction > 0 else '-'} at V={voltage:.3f}")
+                start = x
+            elif breakaway_at is not None and moved >= distance:
+                break
+            if abs(voltage) >= target:
+                held += 1
+                if held > self.steps(0.5):
+                    if breakaway_at is None:
+                        self.note(f"no breakaway up to {target:g} V")
+                    break
+        return breakaway_at
+
+
+def run_ramp_test(
+    rig: Rig,
+    iterations: int = 5,
+    *,
+    settings: RampSettings | None = None,
+    on_iteration: Callable[[int, int], None] | None = None,
+    on_progress: Callable[[str], None] | None = None,
+    **overrides: float,
+) -> RampLog:
+    """Run the ramp test on ``rig`` and return the log (SPEC §8).
+
+    Parameters
+    ----------
+    rig : Rig
+        The real rig (HIL) or a :class:`~pendulab.calibration.rig.VirtualRig`.
+    iterations : int
+        Number of iterations (default 5); each ramps in both directions.
+    settings : RampSettings, optional
+        Rates, distances, limits; ``**overrides`` replace single fields.
+    on_iteration : callable(i, n), optional
+        Called at the start of iteration ``i`` (1-based) of ``n``.
+    on_progress : callable(str), optional
+        Short progress messages (breakaways, track limits).
+
+    Returns
+    -------
+    RampLog
+        ``t``, ``V``, ``x``; ``events`` lists what happened; ``interrupted`` is true after Ctrl-C.
+    """
+    if not isinstance(iterations, int) or iterations < 1:
+        raise CalibrationError(f"iterations={iterations!r} must be a whole number >= 1")
+    settings = replace(settings or RampSettings(), **overrides)
+    progress = on_progress or (lambda text: None)
+    run = _Run(rig, settings, progress)
+    interrupted = False
+    try:
+        for i in range(1, iterations + 1):
+            run.note(f"iteration {i}")
+            if on_iteration:
+                on_iteration(i, iterations)
+            for direction in (1, -1):
+                sign = "+" if direction > 0 else "-"
+                try:
+                    run.centre()
+                    run.note(f"slow ramp {sign}")
+                    breakaway = run.ramp(direction, settings.ramp_rate, settings.max_voltage, settings.motion_distance)
+                    run.note(f"release {sign}")
+                    run.wait_still()
+                    if breakaway is None:
+                        progress(f"iteration {i} {sign}: no breakaway up to {settings.max_voltage:g} V")
+                        continue
+                    progress(f"iteration {i} {sign}: breakaway at {breakaway:.3f} V")
+                    run.centre()
+                    run.note(f"probe {sign}")
+                    target = min(settings.max_voltage, settings.probe_factor * abs(breakaway))
+                    run.ramp(direction, settings.probe_rate, target, settings.probe_distance)
+                    run.note(f"release {sign}")
+                    run.wait_still()
+                except _Stopped:
+                    progress(f"iteration {i} {sign}: a phase timed out; going on")
+        run.centre()
+    except KeyboardInterrupt:
+        interrupted = True
+        run.note("interrupted: motor off")
+        progress("interrupted: motor off, keeping what was measured")
+    finally:
+        try:
+            rig.stop()
+        except Exception:  # the log matters more than a failing stop on a broken link
+            pass
+    if len(run.t) < 2:
+        raise CalibrationError("the ramp test was stopped before anything was measured")
+    return RampLog(
+        t=np.asarray(run.t),
+        V=np.asarray(run.V),
+        x=np.asarray(run.x),
+        source=getattr(rig, "description", "rig"),
+        interrupted=interrupted,
+        events=tuple(run.events),
+    )

@@ -1,0 +1,250 @@
+"""The rig interface of the calibration procedure, and the virtual rig.
+
+A :class:`Rig` takes one voltage per period and returns the measured cart position. The ramp test
+(:func:`pendulab.calibration.ramp.run_ramp_test`) only talks to this interface, so the same code runs
+against the real rig (through the hardware-in-the-loop link, SPEC §9) and against the virtual rig
+here: the plant FMU with the pendulum removed (``Mp = 0``).
+
+Examples
+--------
+>>> from pendulab.calibration.rig import VirtualRig
+>>> with VirtualRig(friction=(2.0, 0.005, 3.5, 0.05, 25.0), x0=0.0) as rig:
+...     x = rig.reset()
+...     for _ in range(100):
+...         x = rig.step(0.5)          # 0.86 N < F1: the cart sticks
+>>> x
+0.0
+"""
+
+from __future__ import annotations
+
+import abc
+import shutil
+import warnings
+from typing import Sequence
+
+import numpy as np
+
+from pendulab.errors import CalibrationError, FmuBuildError
+from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
+
+#: The pendulum's fields, zeroed for the cart alone.
+_NO_PENDULUM = {"Mp": 0.0, "Lp": 0.0, "lp": 0.0, "Ip": 0.0, "Bp": 0.0}
+
+
+class Rig(abc.ABC):
+    """A cart on a track that takes a voltage each period and reports its measured position.
+
+    Implementations: :class:`VirtualRig` (plant FMU, pendulum removed) and, later, the HIL rig.
+    ``step`` blocks for one period on real hardware; on a virtual rig it returns at once.
+    """
+
+    #: Control period (s).
+    period: float = 1e-3
+    #: Short text for logs and metadata.
+    description: str = "rig"
+
+    @property
+    @abc.abstractmethod
+    def time(self) -> float:
+        """Time (s) since :meth:`reset`."""
+
+    @abc.abstractmethod
+    def reset(self) -> float:
+        """Start a new run (time 0, motor off) and return the measured position (m)."""
+
+    @abc.abstractmethod
+    def step(self, voltage: float) -> float:
+        """Apply ``voltage`` (V) for one period and return the measured position (m) at its end."""
+
+    def stop(self) -> None:
+        """Motor off (voltage 0). The default applies 0 V for one period."""
+        self.step(0.0)
+
+    def close(self) -> None:
+        """Release the rig (files, links)."""
+
+    def __enter__(self) -> "Rig":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class VirtualRig(Rig):
+    """The plant FMU with the pendulum removed, stepped at a fixed period.
+
+    Parameters
+    ----------
+    params : PlantParameters, optional
+        The cart's true parameters (default: IP02 cart, lab friction). The pendulum fields are
+        zeroed whatever is given.
+    friction : sequence of 5 floats, optional
+        True friction vector ``[F1, v1, F2, v2, B]`` (overrides ``params``).
+    x0 : float
+        Where the cart stands when the run starts (m); off centre, so the procedure must centre it.
+    period : float
+        Step length (s), default 1 ms.
+    backend : {"auto", "fmu", "casadi"}
+        ``"fmu"`` steps ``Plant.fmu`` through fmpy (built on first use); ``"casadi"`` steps the
+        CasADi model in-process (the same equations, no compiler needed); ``"auto"`` uses the FMU
+        and falls back to CasADi when it cannot be built.
+    """
+
+    def __init__(
+        self,
+        params: PlantParameters | None = None,
+        *,
+        friction: Sequence[float] | None = None,
+        x0: float = 0.05,
+        period: float = 1e-3,
+        backend: str = "auto",
+    ) -> None:
+        params = params or PlantParameters.preset(pendulum="none")
+        if friction is not None:
+            friction = [float(f) for f in friction]
+            if len(friction) != 5:
+                raise CalibrationError(f"the virtual rig's friction needs 5 numbers F1,v1,F2,v2,B, got {len(friction)}")
+            params = params.with_values(**dict(zip(FRICTION_NAMES, friction)))
+        self.params = params.with_values(**_NO_PENDULUM)
+        if not period > 0:
+            raise CalibrationError(f"rig period {period} must be > 0 s")
+        self.period = float(period)
+        self.x0 = float(x0)
+        if backend not in ("auto", "fmu", "casadi"):
+            raise CalibrationError(f"unknown virtual rig backend {backend!r}; choose auto, fmu or casadi")
+        self._stepper: _FmuStepper | _CasadiStepper
+        if backend in ("auto", "fmu"):
+            try:
+                self._stepper = _FmuStepper(self.params, self.period)
+            except (FmuBuildError, OSError) as exc:
+                if backend == "fmu":
+                    raise CalibrationError(f"cannot use the plant FMU for the virtual rig: {exc}") from None
+                warnings.warn(f"plant FMU unavailable ({exc}); the virtual rig steps the CasADi model instead", stacklevel=2)
+                self._stepper = _CasadiStepper(self.params, self.period)
+        else:
+            self._stepper = _CasadiStepper(self.params, self.period)
+        self.backend = self._stepper.name
+        self.description = f"virtual rig ({self.backend}, friction {list(self.params.friction)})"
+        self._k = 0
+
+    @property
+    def time(self) -> float:
+        return self._k * self.period
+
+    @property
+    def state(self) -> np.ndarray:
+        """True ``[x, xdot]`` (for tests; a real rig cannot report it)."""
+        return self._stepper.state()
+
+    def reset(self) -> float:
+        self._k = 0
+        return self._stepper.reset(self.x0)
+
+    def step(self, voltage: float) -> float:
+        x = self._stepper.step(float(voltage), self.time)
+        self._k += 1
+        return x
+
+    def close(self) -> None:
+        self._stepper.close()
+
+
+class _FmuStepper:
+    """Co-simulation of ``Plant.fmu`` through fmpy: set ``V``, ``doStep``, read ``x_measured``."""
+
+    name = "fmu"
+
+    def __init__(self, params: PlantParameters, period: float) -> None:
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        from pendulab.fmu.build import ensure_fmu
+
+        path = ensure_fmu("Plant")
+        description = read_model_description(str(path))
+        self._vr = {v.name: v.valueReference for v in description.modelVariables}
+        self._unzipped = extract(str(path))
+        self._fmu = FMU2Slave(
+            guid=description.guid,
+            unzipDirectory=self._unzipped,
+            modelIdentifier=description.coSimulation.modelIdentifier,
+            instanceName="virtual_rig",
+        )
+        self._fmu.instantiate()
+        self._params = params
+        self._period = period
+        self._in = [self._vr["V"]]
+        self._out = [self._vr["x_measured"]]
+        self._live = False
+
+    def reset(self, x0: float) -> float:
+        fmu, vr = self._fmu, self._vr
+        if self._live:
+            fmu.reset()
+        fmu.setupExperiment(startTime=0.0)
+        names = self._params.names()
+        fmu.setReal([vr[n] for n in names], self._params.as_vector())
+        fmu.setReal([vr["x"], vr["xdot"], vr["alpha"], vr["alphadot"], vr["V"]], [x0, 0.0, 0.0, 0.0, 0.0])
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        self._live = True
+        return fmu.getReal(self._out)[0]
+
+    def step(self, voltage: float, t: float) -> float:
+        self._fmu.setReal(self._in, [voltage])
+        status = self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=self._period)
+        if status not in (0, None):  # pragma: no cover - the FMU checks for non-finite states
+            raise CalibrationError(f"the plant FMU failed at t={t:g} s (status {status})")
+        return self._fmu.getReal(self._out)[0]
+
+    def state(self) -> np.ndarray:
+        return np.asarray(self._fmu.getReal([self._vr["x"], self._vr["xdot"]]))
+
+    def close(self) -> None:
+        try:
+            if self._live:
+                self._fmu.terminate()
+            self._fmu.freeInstance()
+        finally:
+            shutil.rmtree(self._unzipped, ignore_errors=True)
+            self._live = False
+
+
+class _CasadiStepper:
+    """The same plant stepped in-process by the CasADi model (``PlantModel`` sub-steps + encoder)."""
+
+    name = "casadi"
+
+    def __init__(self, params: PlantParameters, period: float) -> None:
+        import casadi as ca
+
+        from pendulab.model.plant import MAX_SUBSTEP, PlantModel, _step_function, substeps
+
+        n_sub = substeps(period, MAX_SUBSTEP)
+        step = _step_function(False, n_sub)
+        model = PlantModel()
+        state, V, t = ca.MX.sym("state", 4), ca.MX.sym("V"), ca.MX.sym("t")
+        p = ca.MX.sym("p", model.n_parameters)
+        after = step(state, V, p, t, period / n_sub)
+        measured = model.outputs(after, V, p, t + period)[1]
+        self._f = ca.Function("virtual_rig_step", [state, V, p, t], [after, measured]).expand()
+        self._measure = model.outputs
+        self._p = ca.DM(params.as_vector())
+        self._state = ca.DM.zeros(4)
+
+    def reset(self, x0: float) -> float:
+        import casadi as ca
+
+        self._state = ca.DM([x0, 0.0, 0.0, 0.0])
+        return float(self._measure(self._state, 0.0, self._p, 0.0)[1])
+
+    def step(self, voltage: float, t: float) -> float:
+        self._state, measured = self._f(self._state, voltage, self._p, t)
+        return float(measured)
+
+    def state(self) -> np.ndarray:
+        return np.asarray(self._state).ravel()[:2]
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,136 @@
+"""``pendulab calibrate``: the ramp test, friction extraction and the calibration file (SPEC §8)."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+from pathlib import Path
+
+from pendulab.errors import CalibrationError
+from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="run the friction ramp test and write a calibration file",
+        description=(
+            "Ramp test with the pendulum removed: centre the cart, ramp the voltage slowly in both directions "
+            "until the cart breaks away, release, probe; extract the friction vector [F1, v1, F2, v2, B] "
+            "(forces scaled by the mass ratio for the pendulum's weight), average it over the iterations and "
+            "write it as a calibration file."
+        ),
+    )
+    parser.add_argument("--virtual", action="store_true", help="run against the virtual rig (the plant FMU without the pendulum)")
+    parser.add_argument("--iterations", type=_positive_int, default=5, metavar="N", help="iterations, each in both directions (default 5)")
+    parser.add_argument(
+        "--friction", metavar="F1,v1,F2,v2,B", type=_friction,
+        help="the virtual rig's true friction vector (N, m/s, N, m/s, kg/s); default the lab table",
+    )
+    parser.add_argument("--pendulum", default="long", choices=("long", "short", "none"), help="pendulum the file is for: sets the mass ratio (default long)")
+    parser.add_argument("--cart", default="ip02", choices=CARTS, help="cart (default ip02, no load)")
+    parser.add_argument("--out", metavar="FILE", help="calibration file to write (default calibration/<date>-<rig>.json)")
+    parser.add_argument("--log", metavar="CSV", help="also save the ramp-test log (t, V, x) for 'pendulab fit'")
+    parser.add_argument("--x0", type=float, default=0.05, metavar="M", help="virtual rig: where the cart starts (default 0.05 m)")
+    parser.add_argument("--backend", default="auto", choices=("auto", "fmu", "casadi"), help=argparse.SUPPRESS)
+    parser.set_defaults(func=run)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
+    return value
+
+
+def _friction(text: str) -> tuple[float, ...]:
+    from pendulab.calibration.files import Calibration
+
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) != 5:
+        raise argparse.ArgumentTypeError(f"{text!r} needs 5 numbers F1,v1,F2,v2,B (got {len(parts)})")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not 5 comma-separated numbers F1,v1,F2,v2,B") from None
+    try:
+        Calibration(values)  # the same checks as a calibration file (>= 0, v1 <= v2, F1 <= F2)
+    except CalibrationError as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace("calibration: ", "")) from None
+    return values
+
+
+def _check_writable(path: Path, what: str) -> None:
+    """Fail before a long run, not after it."""
+    if path.is_dir():
+        raise CalibrationError(f"{what} {path} is a directory; give a file name")
+    folder = path.parent if str(path.parent) else Path(".")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CalibrationError(f"cannot create the folder of {what} {path}: {exc.strerror or exc}") from None
+    if not folder.is_dir():
+        raise CalibrationError(f"the folder of {what} {path} is not a directory")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pendulab.calibration.extract import extract_friction, mass_ratio
+    from pendulab.calibration.files import save_calibration
+    from pendulab.calibration.logs import write_log
+    from pendulab.calibration.ramp import run_ramp_test
+
+    if not args.virtual:
+        raise CalibrationError(
+            "calibrating the real rig needs the hardware-in-the-loop link, which is not available yet; "
+            "use --virtual for the virtual rig"
+        )
+    from pendulab.calibration.rig import VirtualRig
+
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out else Path("calibration") / f"{stamp}-virtual.json"
+    _check_writable(out, "--out")
+    if args.log:
+        _check_writable(Path(args.log), "--log")
+    nominal = PlantParameters.preset(pendulum="none", cart=args.cart)
+    ratio = mass_ratio(PlantParameters.preset(pendulum=args.pendulum, cart=args.cart))
+    true = nominal.with_values(**dict(zip(FRICTION_NAMES, args.friction))) if args.friction else nominal
+
+    def announce(i: int, n: int) -> None:
+        print(f"iteration {i}/{n}: centring, ramps in both directions, probes", flush=True)
+
+    def note(text: str) -> None:
+        print(f"  {text}", flush=True)
+
+    with VirtualRig(true, x0=args.x0, backend=args.backend) as rig:
+        print(f"ramp test on the {rig.description}, {args.iterations} iteration(s) (Ctrl-C stops and keeps what was measured)", flush=True)
+        log = run_ramp_test(rig, iterations=args.iterations, on_iteration=announce, on_progress=note)
+    if args.log:
+        write_log(log, args.log)
+        print(f"log written to {args.log}")
+    estimate = extract_friction(log, mass_ratio=ratio, params=nominal)
+    print(f"friction vector for the {args.pendulum} pendulum (mass ratio {ratio:.3f}), mean ± spread over the iterations:")
+    print(estimate.summary())
+    for text in estimate.notes:
+        print(f"note: {text}")
+    calibration = estimate.to_calibration(
+        date=_dt.datetime.now().isoformat(timespec="seconds"),
+        rig="virtual rig (plant FMU, pendulum removed)" if rig.backend == "fmu" else "virtual rig (CasADi plant, pendulum removed)",
+        rig_true_friction=dict(zip(FRICTION_NAMES, true.friction)),
+        iterations=args.iterations,
+        interrupted=log.interrupted,
+        pendulum=args.pendulum,
+        cart=args.cart,
+    )
+    save_calibration(calibration, out)
+    print(f"calibration written to {out}")
+    return 0 if not log.interrupted else 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    from pendulab.cli.main import main
+
+    sys.exit(main(["calibrate", *sys.argv[1:]]))

@@ -1,0 +1,103 @@
+"""``pendulab fit``: least-squares refit of friction, Beq and force gain from logs (SPEC §8)."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+from pathlib import Path
+
+from pendulab.errors import CalibrationError
+from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "fit",
+        help="refit friction, Beq and force gain to logged runs (least squares, CasADi + IPOPT)",
+        description=(
+            "Replay the logged voltage through the CasADi plant (smoothed friction) and fit the friction vector, "
+            "Beq and the force gain (optionally M_cart) to the logged positions by multiple shooting. "
+            "Logs: CSV with columns t, V, x (alpha optional), or the run.csv / run.mat of 'pendulab simulate'."
+        ),
+    )
+    parser.add_argument("logs", nargs="+", metavar="LOG", help="log files (CSV or run.mat)")
+    parser.add_argument("--pendulum", default="none", choices=("long", "short", "none"), help="configuration the logs were taken in (default none: ramp tests)")
+    parser.add_argument("--cart", default="ip02", choices=CARTS, help="cart (default ip02, no load)")
+    parser.add_argument("--calibration", metavar="FILE", help="start from this calibration instead of the lab defaults")
+    parser.add_argument(
+        "--fit", default="F1,v1,F2,v2,B,Beq,force_gain", metavar="NAMES",
+        help="comma-separated parameters to fit (default F1,v1,F2,v2,B,Beq,force_gain)",
+    )
+    parser.add_argument("--fit-mass", action="store_true", help="also fit M_cart")
+    parser.add_argument("--scale-for", choices=("long", "short"), metavar="PENDULUM",
+                        help="scale the fitted F1, F2 by the mass ratio for this pendulum (logs taken without it)")
+    parser.add_argument("--out", metavar="FILE", help="write the fitted values as a calibration file (JSON)")
+    parser.add_argument("--plot", metavar="PNG", help="plot measured against refitted motion")
+    parser.add_argument("--interval", type=float, default=0.01, metavar="S", help="shooting interval (default 0.01 s)")
+    parser.set_defaults(func=run)
+
+
+def _check_output(path: str, what: str, suffix: str | None = None) -> Path:
+    target = Path(path)
+    if target.is_dir():
+        raise CalibrationError(f"{what} {target} is a directory; give a file name")
+    if suffix and target.suffix.lower() != suffix:
+        raise CalibrationError(f"{what} {target} must end in {suffix}")
+    folder = target.parent if str(target.parent) else Path(".")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CalibrationError(f"cannot create the folder of {what} {target}: {exc.strerror or exc}") from None
+    return target
+
+
+def run(args: argparse.Namespace) -> int:
+    from pendulab.calibration.extract import mass_ratio
+    from pendulab.calibration.files import load_calibration, save_calibration
+    from pendulab.calibration.fit import FITTABLE, fit_parameters, plot_fit
+    from pendulab.calibration.logs import read_log
+
+    names = [n.strip() for n in args.fit.split(",") if n.strip()]
+    unknown = [n for n in names if n not in FITTABLE]
+    if unknown:
+        raise CalibrationError(f"--fit: cannot fit {unknown[0]!r}; choose among {', '.join(FITTABLE)}")
+    if not (0 < args.interval <= 1.0):
+        raise CalibrationError(f"--interval {args.interval} must be in (0, 1] s")
+    out = _check_output(args.out, "--out") if args.out else None
+    plot = _check_output(args.plot, "--plot", ".png") if args.plot else None
+
+    params0 = PlantParameters.preset(pendulum=args.pendulum, cart=args.cart)
+    if args.calibration:
+        params0 = load_calibration(args.calibration).apply(params0)
+    logs = [read_log(path) for path in args.logs]
+    result = fit_parameters(
+        logs, params0, fit=names, fit_mass=args.fit_mass, interval=args.interval, on_progress=lambda text: print(text, flush=True)
+    )
+    print(result.summary())
+    if not result.success:
+        print(f"warning: IPOPT did not converge ({result.status}); the values above are its last iterate")
+
+    if out:
+        metadata = {
+            "date": _dt.datetime.now().isoformat(timespec="seconds"),
+            "logs": [str(p) for p in args.logs],
+            "pendulum": args.pendulum,
+            "cart": args.cart,
+        }
+        calibration = result.to_calibration(**metadata)
+        if args.scale_for:
+            ratio = mass_ratio(PlantParameters.preset(pendulum=args.scale_for, cart=args.cart)) / mass_ratio(params0)
+            friction = dict(zip(FRICTION_NAMES, calibration.friction))
+            friction["F1"] *= ratio
+            friction["F2"] *= ratio
+            calibration = type(calibration)(
+                friction=tuple(friction[n] for n in FRICTION_NAMES),
+                Beq=calibration.Beq, force_gain=calibration.force_gain, M_cart=calibration.M_cart,
+                metadata={**calibration.metadata, "mass_ratio": ratio, "scaled_for": args.scale_for},
+            )
+        save_calibration(calibration, out)
+        print(f"calibration written to {out}")
+    if plot:
+        plot_fit(result, plot)
+        print(f"plot written to {plot}")
+    return 0
