@@ -20,7 +20,6 @@ import os
 import shutil
 import subprocess
 import tempfile
-from functools import lru_cache
 from pathlib import Path
 from typing import Sequence
 
@@ -28,7 +27,6 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from pendulab.model.parameters import PlantParameters
 
 
 def cache_dir() -> Path:
@@ -37,11 +35,14 @@ def cache_dir() -> Path:
     return Path(root) / "fit"
 
 
-def _compile(functions: Sequence[ca.Function], name: str) -> str | None:
-    """Shared library holding ``functions`` (built once, cached); ``None`` without a working compiler."""
+def _compile(functions: Sequence[ca.Function], name: str) -> tuple[str | None, bool]:
+    """Shared library holding ``functions`` (built once, cached) and whether it was built just now.
+
+    ``(None, False)`` without a working compiler.
+    """
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not compiler:
-        return None
+        return None, False
     with tempfile.TemporaryDirectory(prefix="pendulab-fit-") as tmp:
         gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         for f in functions:
@@ -51,22 +52,22 @@ def _compile(functions: Sequence[ca.Function], name: str) -> str | None:
         digest = hashlib.sha256(source + ca.__version__.encode()).hexdigest()[:16]
         target = cache_dir() / f"{name}_{digest}.so"
         if target.is_file():
-            return str(target)
+            return str(target), False
         target.parent.mkdir(parents=True, exist_ok=True)
         partial = Path(tmp, target.name)
         command = [compiler, "-O1", "-shared", "-fPIC", "-fno-math-errno", str(Path(tmp, f"{name}.c")), "-o", str(partial), "-lm"]
         try:
             result = subprocess.run(command, capture_output=True, text=True, timeout=600)
         except (OSError, subprocess.TimeoutExpired):
-            return None
+            return None, False
         if result.returncode != 0:
-            return None
+            return None, False
         # Another process may build the same file: rename is atomic, the last one wins.
         fd, staged = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".part")
         os.close(fd)
         shutil.copyfile(partial, staged)
         os.replace(staged, target)
-        return str(target)
+        return str(target), True
 
 
 class IntervalFunctions:
@@ -111,23 +112,27 @@ class IntervalFunctions:
         y = ca.vertcat(*outputs)
         inputs = [s0, V, h, t, theta, scales]
         z = ca.vertcat(s0, theta)
-        key = hashlib.sha256(repr((n_steps, n_sub, n_states, with_alpha, tuple(fitted_idx), [float(v) for v in p0])).encode())
+        fixed = [0.0 if i in fitted_idx else float(v) for i, v in enumerate(p0)]  # fitted values are inputs
+        key = hashlib.sha256(repr((n_steps, n_sub, n_states, with_alpha, tuple(fitted_idx), fixed)).encode())
         tag = key.hexdigest()[:10]
         F = ca.Function(f"fit_interval_{tag}", inputs, [end, y])
         G = ca.Function(f"fit_interval_jac_{tag}", inputs, [end, y, ca.jacobian(y, z), ca.jacobian(end, z)])
-        self.compiled = False
+        self.compiled = self.built = False
         library = None
         if compile is not False:
-            library = _compile([F, G], f"pendulab_fit_{tag}")
+            library, self.built = _compile([F, G], f"pendulab_fit_{tag}")
         if library:
             self.F, self.G = ca.external(F.name(), library), ca.external(G.name(), library)
             self.compiled = True
         else:
             self.F, self.G = F, G
 
-    @lru_cache(maxsize=8)
     def mapped(self, N: int) -> tuple[ca.Function, ca.Function]:
-        return self.F.map(N, "serial"), self.G.map(N, "serial")
+        """``F`` and ``G`` mapped over ``N`` intervals."""
+        cache = self.__dict__.setdefault("_mapped", {})
+        if N not in cache:
+            cache[N] = (self.F.map(N, "serial"), self.G.map(N, "serial"))
+        return cache[N]
 
 
 class LogBlock:

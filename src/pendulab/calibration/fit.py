@@ -1,32 +1,43 @@
 """Least-squares refit of the friction vector, ``Beq`` and the force gain from logs (SPEC §8).
 
-The logged voltage is replayed through the CasADi plant with the smoothed friction model
-(``PlantModel(smooth_friction=True)``: the stick-slip switches become steep sigmoids so that the
-problem is differentiable) and the parameters are chosen to minimize the squared error to the logged
-positions (and angles, for logs with the pendulum).
+The logged voltage is replayed through the CasADi plant and the parameters are chosen to minimize
+the squared error to the logged positions (and angles, for logs with the pendulum).
 
 Method
 ------
+*Model.* The equations are :func:`pendulab.model.plant.plant_equations`; for fitting, its friction
+force is replaced by a smoothed stick-slip law (:func:`fit_model`; the switch widths scale with
+the thresholds so that a cart below ``F1`` really stays stuck).
+
 *Multiple shooting.* The log is cut into shooting intervals of ``interval`` seconds (10 ms). The
-state at the start of every interval is a decision variable, initialized from the smoothed log; one
-interval integrates the logged samples with RK4 (sub-steps of at most ``max_substep``) inside one
-CasADi function, applied to all intervals at once with ``map``. Continuity between intervals is an
-equality constraint. IPOPT (through ``nlpsol``) solves the problem with a Gauss-Newton Hessian
-(``J^T J`` of the residuals; supplied as ``hess_lag``), which is what makes a 60 s log at 1 kHz
-take seconds rather than minutes.
+state at the start of every interval is an unknown, initialized from the smoothed log; one interval
+integrates its logged samples with RK4 (sub-steps of at most ``max_substep``) inside one CasADi
+function, applied to all intervals at once with ``map``. Those functions and their Jacobians are
+compiled to C once per machine (see :mod:`pendulab.calibration._shooting`).
+
+*Continuity as process noise.* The defect between the end of one interval and the start of the
+next is a residual weighted by ``process_noise`` (per interval: 5 um, 0.5 mm/s) rather than a hard
+constraint. Stick-slip makes a simulation extremely sensitive to when the cart breaks away or
+re-sticks: with hard continuity a millisecond of difference in one breakaway becomes a millimetre
+offset that lasts until the end of the log and drowns everything else. The small defects absorb such
+local model errors, while the parameters still have to explain the motion of every interval.
+
+*Solver.* IPOPT (through ``nlpsol``) on ``1/2 |r|^2`` with the gradient ``J^T r`` and the
+Gauss-Newton Hessian ``J^T J`` supplied (``grad_f``, ``hess_lag``); the constraints ``F1 <= F2`` and
+``v1 <= v2`` and positivity bounds keep the friction model well ordered.
 
 *Scaling.* Each fitted parameter is a decision variable divided by its starting value (or a typical
 size where that is 0), so all are of order 1.
 
 *A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
-standard deviation of 100 % of the starting value (in units of the measurement noise). It keeps
-parameters that the logs cannot show (``F2`` or ``v1`` on some logs) at their starting values and
-moves identifiable ones by far less than their uncertainty.
+standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
+parameters that the logs cannot show at their starting values (their uncertainty is then about
+100 %) and moves well-determined ones by far less than their uncertainty.
 
-*Uncertainty.* With the solution's residuals ``r`` (``N`` samples, ``n`` parameters) and the
-sensitivities ``J = dr/dp`` of the continuous (single-shooting) trajectory,
-``cov = (J^T J)^-1 * sigma^2`` with ``sigma^2 = r^T r / (N - n)``; the reported uncertainty is the
-square root of its diagonal.
+*Uncertainty.* ``cov = (J^T J)^-1 * sigma^2`` with ``J`` the Jacobian of all residuals with respect
+to all unknowns (parameters and shooting nodes) at the solution and ``sigma^2 = r^T r / (N - n)``;
+the parameters' block is their covariance with the nodes eliminated, and the reported standard
+uncertainty is the square root of its diagonal.
 
 Examples
 --------
@@ -57,7 +68,6 @@ from pendulab.calibration.files import FITTED_NAMES, Calibration
 from pendulab.calibration.logs import RampLog
 from pendulab.errors import CalibrationError
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
-from pendulab.model.plant import PlantModel
 
 #: What ``fit_parameters`` fits by default.
 DEFAULT_FIT = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
@@ -137,7 +147,7 @@ class FitResult:
 
 # ---------------------------------------------------------------------- the fit's model
 #: Widths of the smoothed stick-slip switches, relative to the thresholds they smooth.
-STICK_SPEED_WIDTH = 0.1  # x v1
+STICK_SPEED_WIDTH = 0.05  # x v1
 SLIP_SPEED_WIDTH = 0.02  # x v2
 FORCE_WIDTH = 0.01  # x F1, F2
 
@@ -315,7 +325,7 @@ def fit_parameters(
     _check_logs(logs, with_pendulum, samples_per_interval)
     defect_sigma = np.asarray(process_noise, dtype=float)[:ns]
 
-    progress("preparing the shooting functions" + (" (compiling once per machine)" if compile is not False else ""))
+    t_prepare = time.perf_counter()
     functions: dict[tuple[int, int], IntervalFunctions] = {}
     blocks: list[LogBlock] = []
     offset_w, offset_r = len(names), 0
@@ -331,6 +341,8 @@ def fit_parameters(
         blocks.append(block)
         offset_w += block.n_w
         offset_r += block.n_r
+    if any(f.built for f in functions.values()):
+        progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
     problem = Problem(blocks, len(names), scales, theta0, regularization)
     compiled = all(f.compiled for f in functions.values())
 
@@ -407,6 +419,41 @@ def fit_parameters(
         seconds=time.perf_counter() - t_start,
         curves=tuple(curves),
     )
+
+
+def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[PlantParameters, str]:
+    """Starting values from the ramp-test extraction, where the logs are ramp tests.
+
+    The least-squares problem of stick-slip friction has local minima: a start far from the truth
+    (twice the breakaway force, half the drag) can end in one. The rule-based extraction of
+    :func:`~pendulab.calibration.extract.extract_friction` is robust and lands within a few per cent,
+    so it makes a good start. Logs that are not ramp tests (closed-loop runs), or a pendulum
+    configuration, keep ``params0``.
+
+    Returns
+    -------
+    params, note
+        The starting parameters and a sentence saying where they came from.
+    """
+    from pendulab.calibration.extract import extract_friction
+
+    if params0.Mp > 0:
+        return params0, "starting from the given parameters (logs with the pendulum)"
+    vectors = []
+    for log in logs:
+        try:
+            estimate = extract_friction(log, params=params0)
+        except CalibrationError:
+            continue
+        vectors.append({n: v for n, v in zip(FRICTION_NAMES, estimate.measured) if estimate.counts.get(n, 0) > 0})
+    if not vectors:
+        return params0, "starting from the given parameters (no ramp test found in the logs)"
+    values = {n: float(np.mean([v[n] for v in vectors if n in v])) for n in FRICTION_NAMES if any(n in v for v in vectors)}
+    merged = {**dict(zip(FRICTION_NAMES, params0.friction)), **values}
+    merged["F2"] = max(merged["F2"], merged["F1"])
+    merged["v1"] = min(merged["v1"], merged["v2"])
+    text = ", ".join(f"{n}={merged[n]:.4g}" for n in FRICTION_NAMES)
+    return params0.with_values(**merged), f"starting from the ramp-test extraction: {text}"
 
 
 def _uncertainty(problem, r: np.ndarray, J: ca.DM) -> np.ndarray:

@@ -120,6 +120,7 @@ class _Run:
         """P loop on x, with an integral that only acts while the cart is stuck off centre."""
         s, dt = self.s, self.rig.period
         integral = 0.0
+        self.note("centring")
         for _ in range(self.steps(s.phase_timeout)):
             x = self.position
             if abs(x) <= s.centre_tolerance:

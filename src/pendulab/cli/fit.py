@@ -29,6 +29,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="comma-separated parameters to fit (default F1,v1,F2,v2,B,Beq,force_gain)",
     )
     parser.add_argument("--fit-mass", action="store_true", help="also fit M_cart")
+    parser.add_argument(
+        "--start", choices=("auto", "defaults"), default="auto",
+        help="auto: start the friction from the ramp-test extraction where the logs are ramp tests (robust); "
+        "defaults: from the lab defaults or --calibration",
+    )
     parser.add_argument("--scale-for", choices=("long", "short"), metavar="PENDULUM",
                         help="scale the fitted F1, F2 by the mass ratio for this pendulum (logs taken without it)")
     parser.add_argument("--out", metavar="FILE", help="write the fitted values as a calibration file (JSON)")
@@ -54,7 +59,7 @@ def _check_output(path: str, what: str, suffix: str | None = None) -> Path:
 def run(args: argparse.Namespace) -> int:
     from pendulab.calibration.extract import mass_ratio
     from pendulab.calibration.files import load_calibration, save_calibration
-    from pendulab.calibration.fit import FITTABLE, fit_parameters, plot_fit
+    from pendulab.calibration.fit import FITTABLE, fit_parameters, plot_fit, ramp_start
     from pendulab.calibration.logs import read_log
 
     names = [n.strip() for n in args.fit.split(",") if n.strip()]
@@ -70,6 +75,9 @@ def run(args: argparse.Namespace) -> int:
     if args.calibration:
         params0 = load_calibration(args.calibration).apply(params0)
     logs = [read_log(path) for path in args.logs]
+    if args.start == "auto":
+        params0, note = ramp_start(logs, params0)
+        print(note, flush=True)
     result = fit_parameters(
         logs, params0, fit=names, fit_mass=args.fit_mass, interval=args.interval, on_progress=lambda text: print(text, flush=True)
     )

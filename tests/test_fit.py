@@ -1,0 +1,64 @@
+"""Least-squares refit (must-show 2): synthetic logs with known parameters, noise and quantization."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pendulab.calibration.fit import fit_parameters, plot_fit
+from pendulab.calibration.logs import RampLog
+from pendulab.calibration.synthetic import synthetic_ramp_log
+from pendulab.errors import CalibrationError
+from pendulab.model.parameters import PlantParameters
+
+TRUE = PlantParameters.preset("none", Beq=5.2, force_gain=0.9, F1=2.0, v1=0.004, F2=3.6, v2=0.06, B=25.0)
+
+
+@pytest.fixture(scope="module")
+def result():
+    log = synthetic_ramp_log(TRUE, iterations=1, noise=1e-5, seed=3)
+    counts = log.x / TRUE.q_x
+    assert np.allclose(counts, np.round(counts))  # quantized to the encoder step
+    return fit_parameters([log], PlantParameters.preset("none"))  # starts from the lab defaults
+
+
+def test_fit_recovers_Beq_force_gain_and_F1(result):
+    assert result.success
+    assert abs(result.values["Beq"] / TRUE.Beq - 1) < 0.05
+    assert abs(result.values["force_gain"] / TRUE.force_gain - 1) < 0.05
+    assert abs(result.values["F1"] / TRUE.F1 - 1) < 0.10
+    # The start was far away: this is a real fit, not the defaults left alone.
+    assert result.initial["Beq"] == 4.3 and result.initial["force_gain"] == 1.0 and result.initial["F1"] == 1.5
+
+
+def test_fit_reports_uncertainty_and_residual(result):
+    for name in result.names:
+        assert 0 < result.uncertainty[name] < abs(result.values[name])
+    assert 1e-6 < result.residual_rms < 1e-4  # about the noise (10 um) and the encoder step
+    assert result.params.Beq == result.values["Beq"]
+    cal = result.to_calibration(rig="test")
+    assert cal.Beq == result.values["Beq"] and cal.force_gain == result.values["force_gain"]
+    assert cal.friction[0] == result.values["F1"]
+    assert "Beq" in result.summary()
+
+
+def test_plot_of_measured_against_refitted_motion(result, tmp_path):
+    path = plot_fit(result, tmp_path / "fit.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    curve = result.curves[0]
+    assert np.sqrt(np.mean((curve.x_fitted - curve.x_measured) ** 2)) < 1e-4
+
+
+def test_fit_errors_are_user_errors():
+    t = np.arange(3000) * 1e-3
+    still = RampLog(t, np.where(t > 1, 0.3, 0.0), np.zeros_like(t), source="still.csv")
+    with pytest.raises(CalibrationError, match="never moves"):
+        fit_parameters([still])
+    short = RampLog(t[:15], np.linspace(0, 1, 15), np.linspace(0, 1e-3, 15), source="short.csv")
+    with pytest.raises(CalibrationError, match="too short"):
+        fit_parameters([short])
+    moving = RampLog(t, np.minimum(t, 1.0), t * 0.1)
+    with pytest.raises(CalibrationError, match="cannot fit 'Mp'"):
+        fit_parameters([moving], fit=("Mp",))
+    with pytest.raises(CalibrationError, match="no alpha column"):
+        fit_parameters([moving], PlantParameters.preset("long"))
