@@ -53,7 +53,6 @@ def _compile(functions: Sequence[ca.Function], name: str) -> tuple[str | None, b
         target = cache_dir() / f"{name}_{digest}.so"
         if target.is_file():
             return str(target), False
-        target.parent.mkdir(parents=True, exist_ok=True)
         partial = Path(tmp, target.name)
         command = [compiler, "-O1", "-shared", "-fPIC", "-fno-math-errno", str(Path(tmp, f"{name}.c")), "-o", str(partial), "-lm"]
         try:
@@ -63,10 +62,16 @@ def _compile(functions: Sequence[ca.Function], name: str) -> tuple[str | None, b
         if result.returncode != 0:
             return None, False
         # Another process may build the same file: rename is atomic, the last one wins.
-        fd, staged = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".part")
-        os.close(fd)
-        shutil.copyfile(partial, staged)
-        os.replace(staged, target)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            fd, staged = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".part")
+            os.close(fd)
+            shutil.copyfile(partial, staged)
+            os.replace(staged, target)
+        except OSError:  # no writable cache: keep this process's copy in a folder that outlives it
+            keep = Path(tempfile.mkdtemp(prefix="pendulab-fit-"))
+            shutil.copyfile(partial, keep / target.name)
+            return str(keep / target.name), True
         return str(target), True
 
 

@@ -196,7 +196,7 @@ def _noise_level(x: np.ndarray) -> float:
     dx = np.abs(np.diff(x))
     steps = dx[dx > 1e-12]
     q = float(np.min(steps)) if steps.size else 0.0
-    return max(float(np.std(d2)) / math.sqrt(6), q / math.sqrt(12), 1e-7)
+    return max(float(np.std(d2)) / math.sqrt(6), q / math.sqrt(12), 1e-6)
 
 
 def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
@@ -281,7 +281,9 @@ def fit_parameters(
     fit : sequence of str
         Names to fit, among ``F1 v1 F2 v2 B Beq force_gain M_cart``.
     fit_mass : bool
-        Also fit ``M_cart``.
+        Also fit ``M_cart``. Scaling the mass, ``Beq``, ``B``, the friction forces and the force gain
+        together leaves the motion unchanged except through the fixed rotor inertia, so expect large
+        uncertainties on all of them when the mass is fitted too.
     interval : float
         Shooting interval (s).
     max_substep : float

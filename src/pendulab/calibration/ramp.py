@@ -201,6 +201,9 @@ def run_ramp_test(
     """
     if not isinstance(iterations, int) or iterations < 1:
         raise CalibrationError(f"iterations={iterations!r} must be a whole number >= 1")
+    unknown = sorted(set(overrides) - set(RampSettings.__dataclass_fields__))
+    if unknown:
+        raise CalibrationError(f"unknown ramp setting {unknown[0]!r}; known ones are {', '.join(RampSettings.__dataclass_fields__)}")
     settings = replace(settings or RampSettings(), **overrides)
     progress = on_progress or (lambda text: None)
     run = _Run(rig, settings, progress)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import abc
 import shutil
 import warnings
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -89,6 +89,8 @@ class VirtualRig(Rig):
         ``"fmu"`` steps ``Plant.fmu`` through fmpy (built on first use); ``"casadi"`` steps the
         CasADi model in-process (the same equations, no compiler needed); ``"auto"`` uses the FMU
         and falls back to CasADi when it cannot be built.
+    progress : callable(str), optional
+        Told when the plant FMU is being built (first use).
     """
 
     def __init__(
@@ -99,6 +101,7 @@ class VirtualRig(Rig):
         x0: float = 0.05,
         period: float = 1e-3,
         backend: str = "auto",
+        progress: Callable[[str], None] | None = None,
     ) -> None:
         params = params or PlantParameters.preset(pendulum="none")
         if friction is not None:
@@ -116,7 +119,7 @@ class VirtualRig(Rig):
         self._stepper: _FmuStepper | _CasadiStepper
         if backend in ("auto", "fmu"):
             try:
-                self._stepper = _FmuStepper(self.params, self.period)
+                self._stepper = _FmuStepper(self.params, self.period, progress)
             except (FmuBuildError, OSError) as exc:
                 if backend == "fmu":
                     raise CalibrationError(f"cannot use the plant FMU for the virtual rig: {exc}") from None
@@ -155,13 +158,13 @@ class _FmuStepper:
 
     name = "fmu"
 
-    def __init__(self, params: PlantParameters, period: float) -> None:
+    def __init__(self, params: PlantParameters, period: float, progress: Callable[[str], None] | None = None) -> None:
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import FMU2Slave
 
         from pendulab.fmu.build import ensure_fmu
 
-        path = ensure_fmu("Plant")
+        path = ensure_fmu("Plant", progress=progress)
         description = read_model_description(str(path))
         self._vr = {v.name: v.valueReference for v in description.modelVariables}
         self._unzipped = extract(str(path))

@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     def note(text: str) -> None:
         print(f"  {text}", flush=True)
 
-    with VirtualRig(true, x0=args.x0, backend=args.backend) as rig:
+    with VirtualRig(true, x0=args.x0, backend=args.backend, progress=lambda text: print(text, flush=True)) as rig:
         print(f"ramp test on the {rig.description}, {args.iterations} iteration(s) (Ctrl-C stops and keeps what was measured)", flush=True)
         log = run_ramp_test(rig, iterations=args.iterations, on_iteration=announce, on_progress=note)
     if args.log:
@@ -126,8 +126,8 @@ def run(args: argparse.Namespace) -> int:
         cart=args.cart,
     )
     save_calibration(calibration, out)
-    print(f"calibration written to {out}")
-    return 0 if not log.interrupted else 130
+    print(f"calibration written to {out}" + (" (from the iterations measured before the interruption)" if log.interrupted else ""))
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
