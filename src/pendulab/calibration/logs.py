@@ -23,13 +23,13 @@ from __future__ import annotations
 import csv
 import io
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from pendulab.analysis.results import atomic_write
 from pendulab.errors import CalibrationError
 
 #: Accepted column names, first match wins.
@@ -246,17 +246,7 @@ def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
     buffer.write(",".join(names) + "\n")
     np.savetxt(buffer, data, delimiter=",", fmt="%.10g")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, partial = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(buffer.getvalue())
-        os.replace(partial, path)
-    except BaseException:
-        try:
-            os.unlink(partial)
-        except OSError:
-            pass
-        raise
+    atomic_write(path, lambda handle: handle.write(buffer.getvalue().encode("utf-8")))
     return path
 
 

@@ -35,10 +35,10 @@ from __future__ import annotations
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
+from pendulab.analysis.results import atomic_write
 from pendulab.control.controller import Controller, _one_line
 from pendulab.errors import ControllerError
 
@@ -113,19 +113,8 @@ def save_controller_file(controller: Controller, path: str | os.PathLike[str]) -
     suffix = _suffix(path)
     text = controller_toml(controller) if suffix == ".toml" else json.dumps(controller.to_dict(), indent=2) + "\n"
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        atomic_write(path, lambda handle: handle.write(text.encode("utf-8")))
     except OSError as exc:
         raise ControllerError(f"cannot write controller file {path}: {exc.strerror or exc}; check the folder") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise ControllerError(f"cannot write controller file {path}: {exc.strerror or exc}; check the folder") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
 
 __all__ = ["SUFFIXES", "controller_toml", "load_controller_file", "save_controller_file"]
