@@ -15,6 +15,8 @@ from pendulab.errors import UserError
 POKE_DEFAULT = (50.0, 0.005, 1.0)
 #: Longest run in steps (the log is kept in memory): 2000 s at 1 kHz.
 MAX_STEPS = 2_000_000
+#: Longest transport delay, in control periods (the rig protocol's ring holds 8 answers).
+MAX_DELAY = 8
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -40,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--stop-time", type=float, default=5.0, metavar="T", help="simulated time in s (default 5)")
     parser.add_argument("--step", type=float, default=1e-3, metavar="H", help="control period in s (default 0.001)")
     parser.add_argument("--method", choices=("tustin", "zoh"), default="tustin", help="discretization (default tustin)")
+    parser.add_argument("--delay", type=int, default=0, metavar="N",
+                        help="transport delay of N control periods before the plant, as on the rig (default 0; compare with a rig run at its N)")
     parser.add_argument("--no-quantization", action="store_true", help="ideal encoders (no quantization)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: a new folder under runs/)")
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
@@ -74,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
             f"--stop-time {args.stop_time:g} s at --step {args.step:g} s is {args.stop_time / args.step:.3g} steps; "
             f"a run has at most {MAX_STEPS:,}: shorten the run or lengthen the step"
         )
+    if not 0 <= args.delay <= MAX_DELAY:
+        raise UserError(f"--delay {args.delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
     poke = parse_poke(args.poke) if args.poke else None
     controller = controller_from_args(args)
     if controller is None:
@@ -116,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
             method=args.method,
             meta={"pendulum": args.pendulum, "cart": args.cart, "calibration": args.calibration or "default"},
             progress=progress,
+            delay=args.delay,
         )
     except SimulationError as exc:
         # An FMU refused the inputs (e.g. a poke so large that the state overflows): nothing is written.
@@ -137,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.cosim.pendulum import pendulum_system
         from pendulab.cosim.ssp import export_ssp
 
-        system = pendulum_system(params, discretize(controller, h=args.step, method=args.method).to_parameters(), step=args.step)
+        system = pendulum_system(params, discretize(controller, h=args.step, method=args.method).to_parameters(), step=args.step, delay=args.delay)
         written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=args.stop_time))
     _print_summary(result, out_dir, written, time.perf_counter() - started)
     return 0

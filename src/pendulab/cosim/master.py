@@ -405,6 +405,11 @@ class _Plan:
             comp, _, var = path.partition(".")
             read[comp].append(var)
         flat: dict[tuple[str, str], Any] = {}
+        # A delayed connection reads an earlier row of its source's log: the log gets that many
+        # leading rows holding the source's start value (what the target sees before the first output).
+        self._pad: dict[str, int] = {n: 0 for n in order}
+        for c in system.connections:
+            self._pad[c.source] = max(self._pad[c.source], c.delay)
         self.phase_a: list[tuple[list, list, list]] = []
         gets_of: dict[str, list] = {}
         for name in order:
@@ -416,10 +421,14 @@ class _Plan:
             for t, names in by_type.items():
                 if not names:
                     continue
-                log = np.zeros((n_steps + 1, len(names)), dtype=_NUMPY[t])
+                pad = self._pad[name]
+                full = np.zeros((n_steps + 1 + pad, len(names)), dtype=_NUMPY[t])
+                if pad and t == "Real":
+                    full[:pad] = [float(inst.variable(v).start or 0.0) for v in names]
+                log = full[pad:]
                 self._logs[(name, t)] = (log, names)
-                flat[(name, t)] = (ctypes.c_double if t == "Real" else ctypes.c_int32) * log.size
-                flat[(name, t)] = flat[(name, t)].from_buffer(log)
+                flat[(name, t)] = (ctypes.c_double if t == "Real" else ctypes.c_int32) * full.size
+                flat[(name, t)] = flat[(name, t)].from_buffer(full)
                 vrs = (ctypes.c_uint * len(names))(*(inst.variable(v).valueReference for v in names))
                 self._keep += [vrs, flat[(name, t)]]
                 f = _GET((f"fmi2Get{t}".encode(), inst.fmu.dll))
@@ -457,7 +466,8 @@ class _Plan:
                 raise UserError(f"connection {c} joins a {st} to a {tt}; connect variables of the same type")
             log, names = self._logs[(c.source, st)]
             buf, in_names = inputs[(c.target, tt)]
-            copy = (flat[(c.source, st)], (len(names), names.index(c.source_variable)), buf, in_names.index(c.target_variable))
+            first = (self._pad[c.source] - c.delay) * len(names)  # index in the padded log of row k = 0
+            copy = (flat[(c.source, st)], (len(names), first + names.index(c.source_variable)), buf, in_names.index(c.target_variable))
             is_late = any(position[x.source] >= position[c.target] for x in system.connections if x.target == c.target)
             (late_copies if is_late else early_copies[c.target]).append(copy)
         self.phase_a = [(early_copies[n], sets[n], gets_of[n]) for n in order]

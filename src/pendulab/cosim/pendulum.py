@@ -33,6 +33,9 @@ CONNECTIONS = (
     ("supervisor.V", "plant.V"),
 )
 
+#: The plant input the transport delay of the rig (``--delay N``) sits in front of.
+VOLTAGE_INPUT = "plant.V"
+
 #: Recorded signals -> the column names of run.mat / run.csv.
 RECORDED = {
     "plant.x": "x",
@@ -56,6 +59,7 @@ def pendulum_system(
     initial_state: Mapping[str, float] | None = None,
     fmu_dir: Path | None = None,
     controller_fmu: Path | None = None,
+    delay: int = 0,
 ) -> System:
     """The standard three-FMU system.
 
@@ -68,6 +72,10 @@ def pendulum_system(
         Start values of the supervisor (``alpha_max``, ``x_max``, ...).
     controller_fmu : Path, optional
         Another controller FMU with the same interface (e.g. a Python block built with pythonfmu).
+    delay : int, optional
+        Transport delay in control periods between the supervisor's voltage and the plant, as on the
+        rig (SPEC §9: the answer to sample k is applied at tick k + N). 0 (default): the voltage
+        computed from the measurement at t_k acts from t_k on.
     """
     system = System(step=step)
     plant_start = {**params.as_dict(), **(initial_state or {})}
@@ -75,7 +83,7 @@ def pendulum_system(
     system.add("controller", controller_fmu or ensure_fmu("Controller", fmu_dir), {"Lp": params.Lp, "h": step, **controller_parameters})
     system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), dict(supervisor or {}))
     for source, target in CONNECTIONS:
-        system.connect(source, target)
+        system.connect(source, target, delay=delay if target == VOLTAGE_INPUT else 0)
     return system
 
 
@@ -100,6 +108,7 @@ def simulate_poke(
     meta: Mapping[str, Any] | None = None,
     fmu_dir: Path | None = None,
     progress: Callable[[float], None] | None = None,
+    delay: int = 0,
 ) -> SimulationResult:
     """Simulate the loop with a poke and measure the response.
 
@@ -109,13 +118,15 @@ def simulate_poke(
         The student's G(s); discretized at ``step`` with ``method`` (``"tustin"`` or ``"zoh"``).
     params : PlantParameters, optional
         Default: long pendulum, IP02 cart, the lab's friction; the poke is part of the parameters.
+    delay : int, optional
+        Transport delay of N control periods before the plant's voltage input, as on the rig.
     """
     from pendulab.analysis.metrics import compute_metrics
     from pendulab.control.realization import discretize
 
     params = params or PlantParameters.preset()
     lti = discretize(controller, h=step, method=method)
-    system = pendulum_system(params, lti.to_parameters(), step=step, supervisor=supervisor, fmu_dir=fmu_dir)
+    system = pendulum_system(params, lti.to_parameters(), step=step, supervisor=supervisor, fmu_dir=fmu_dir, delay=delay)
     with Master(system) as master:
         log = master.run(stop_time, list(RECORDED), events=events, progress=progress)
     columns = collect_columns(log, params)
@@ -131,6 +142,7 @@ def simulate_poke(
         "controller": describe_controller(controller),
         "discretization": method,
         "step": step,
+        "delay": delay,
         "parameters": params.as_dict(),
         "version": __version__,
         **dict(meta or {}),

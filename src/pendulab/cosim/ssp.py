@@ -15,6 +15,8 @@ Examples
 
 from __future__ import annotations
 
+from pendulab.errors import UserError
+
 import zipfile
 from pathlib import Path
 from typing import BinaryIO
@@ -91,6 +93,9 @@ def system_structure(system: System, name: str = "pendulab", stop_time: float = 
     lines.append("    </ssd:Elements>")
     lines.append("    <ssd:Connections>")
     for c in system.connections:
+        if c.delay:
+            # SSP 1.0 connections carry no delay; an importer would silently run a different loop.
+            raise UserError(f"connection {c} has a transport delay, which SSP cannot express; export the loop with --delay 0")
         lines.append(
             f"      <ssd:Connection startElement={quoteattr(c.source)} startConnector={quoteattr(c.source_variable)}"
             f" endElement={quoteattr(c.target)} endConnector={quoteattr(c.target_variable)}/>"

@@ -36,9 +36,13 @@ class Connection:
     source_variable: str
     target: str
     target_variable: str
+    #: Transport delay in communication steps: the target gets the value the source had ``delay``
+    #: steps earlier (the start value of the source before that), as on the rig (SPEC §9).
+    delay: int = 0
 
     def __str__(self) -> str:
-        return f"{self.source}.{self.source_variable} -> {self.target}.{self.target_variable}"
+        arrow = f" -[{self.delay} step delay]-> " if self.delay else " -> "
+        return f"{self.source}.{self.source_variable}{arrow}{self.target}.{self.target_variable}"
 
 
 @dataclass
@@ -61,10 +65,15 @@ class System:
         self.components[name] = component
         return component
 
-    def connect(self, source: str, target: str) -> Connection:
-        """Connect ``"component.variable"`` to ``"component.variable"`` (output to input)."""
+    def connect(self, source: str, target: str, *, delay: int = 0) -> Connection:
+        """Connect ``"component.variable"`` to ``"component.variable"`` (output to input).
+
+        ``delay`` (steps, >= 0) makes the connection a transport delay of that many control periods.
+        """
         (src, src_var), (dst, dst_var) = (self._split(source), self._split(target))
-        connection = Connection(src, src_var, dst, dst_var)
+        if isinstance(delay, bool) or not isinstance(delay, int) or delay < 0:
+            raise UserError(f"delay {delay!r} of connection {source} -> {target} must be a whole number of steps >= 0")
+        connection = Connection(src, src_var, dst, dst_var, delay)
         if any(c.target == dst and c.target_variable == dst_var for c in self.connections):
             raise UserError(f"input {target} is already connected; an input takes one connection")
         self.connections.append(connection)
