@@ -202,3 +202,13 @@ def prompt_simulation(
     duration = d.question(f"Poke duration in s [{DEFAULT_POKE[1]:g}]: ", _poke_value("duration", DEFAULT_POKE[1], minimum=0.0))
     start = d.question(f"Poke start time in s [{DEFAULT_POKE[2]:g}]: ", _poke_value("start time", DEFAULT_POKE[2], minimum=0.0))
     return PromptAnswers(controller, pendulum, calibration, (magnitude, duration, start))
+
+
+def prompt_controller(
+    ask: Callable[[str], str] = input,
+    say: Callable[[str], None] = print,
+) -> Controller:
+    """Ask for the controller alone (``pendulab lab``: the rig is the plant, a person pokes it)."""
+    d = _Dialogue(ask, say)
+    say(INTRO)
+    return _enter_controller(d)

@@ -1,0 +1,128 @@
+"""``pendulab lab``: run your controller on the rig (or the rig emulator) over the serial link."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
+from pendulab.errors import UserError
+
+MAX_DELAY_DEFAULT = 4
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "lab",
+        help="run your controller on the rig over the serial link (hardware in the loop)",
+        description=(
+            "Connect to the rig (or 'pendulab rig-emulator'), then run the same Controller.fmu and Supervisor.fmu as in "
+            "simulation with the rig as the plant, clocked by the rig. Keys while running: s start, p pause, e end, "
+            "r re-arm after a trip (single keys on a terminal, or lines on stdin when scripted). The log streams to "
+            "DIR/rig_log.csv; at the end DIR holds run.mat, run.csv, metrics.json and timing.json."
+        ),
+        epilog=(
+            "examples:\n"
+            "  pendulab lab --port COM3 --demo\n"
+            "  pendulab lab --port /dev/ttyACM0 --controller my_controller.toml --plot --compare\n"
+            "  pendulab lab --port socket://labpc7:5555 --pid 40,5,4 --stop-time 30"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--port", required=True, metavar="PORT", help="the rig's serial port or pyserial URL (COM3, /dev/ttyACM0, socket://HOST:PORT)")
+    parser.add_argument("--baud", type=int, default=921600, metavar="BAUD", help="baud rate (default 921600)")
+    add_controller_options(parser)
+    add_plant_options(parser)
+    parser.add_argument("--delay", type=int, metavar="N", help="transport delay in periods (default: measured at connection)")
+    parser.add_argument("--max-delay", type=int, default=MAX_DELAY_DEFAULT, metavar="N", help=f"largest delay to accept when measuring (default {MAX_DELAY_DEFAULT})")
+    parser.add_argument("--stop-time", type=float, metavar="T", help="end the session by itself T s after streaming starts")
+    parser.add_argument("--method", choices=("tustin", "zoh"), default="tustin", help="discretization (default tustin)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="run folder (default: a new folder under runs/)")
+    parser.add_argument("--plot", action="store_true", help="also write PNG plots")
+    parser.add_argument("--compare", action="store_true", help="also simulate the same controller at the same delay and write the comparison")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pendulab.cosim.pendulum import pendulum_system
+
+    if args.stop_time is not None and not (math.isfinite(args.stop_time) and args.stop_time > 0):
+        raise UserError(f"--stop-time {args.stop_time} must be a positive number of seconds")
+    if args.delay is not None and not 1 <= args.delay <= 8:
+        raise UserError(f"--delay {args.delay} must be 1 to 8 periods (the answer to sample k is applied at tick k + N)")
+    if not 1 <= args.max_delay <= 8:
+        raise UserError(f"--max-delay {args.max_delay} must be 1 to 8 periods")
+    controller = controller_from_args(args)
+    if controller is None:
+        if not sys.stdin.isatty():
+            raise UserError("no controller given: use --demo, --zeros/--poles/--gain, --pid or --controller FILE (or run on a terminal to be asked)")
+        from pendulab.control.prompt import prompt_controller
+
+        controller = prompt_controller()
+    params = plant_parameters_from_args(args)
+    out_dir = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-lab-{args.pendulum}"
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"output folder {out_dir} is a file; give a folder name for --out")
+
+    from pendulab.control.realization import discretize
+    from pendulab.hil.keys import KeySource
+    from pendulab.hil.link import LinkLost, RigLink
+    from pendulab.hil.session import LabSession, choose_delay, write_lab_results
+
+    def say(text: str) -> None:
+        print(text, flush=True)
+
+    with RigLink.open(args.port, args.baud) as link:
+        identity = link.identify()
+        period = identity.period_us * 1e-6
+        say(f"rig at {args.port}: protocol {identity.protocol}, firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, "
+            f"boot id {identity.boot_id:#010x}, period {identity.period_us} us")
+        # The controller is realized before anything moves: a controller the rules refuse never enables the motor.
+        lti = discretize(controller, h=period, method=args.method)
+        supervisor = {"rig_mode": True, "auto_start": False}
+        system = pendulum_system(params, lti.to_parameters(), step=period, supervisor=supervisor)
+        round_trips = link.round_trips()
+        try:
+            if args.delay is None:
+                delay = choose_delay(link, args.max_delay, announce=say)
+            else:
+                delay = args.delay
+            x_limit = float(system.components["supervisor"].start_values.get("x_max", 0.40)) + 0.03
+            link.configure(delay=delay, x_limit=x_limit)
+            link.zero()
+        except LinkLost as exc:
+            raise UserError(f"{exc} (while setting up the session)") from None
+        say(f"transport delay N = {delay}; encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
+        with KeySource() as keys:
+            session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say)
+            reason, status = session.run()
+    meta = {
+        "controller": getattr(controller, "describe", lambda: str(controller))(),
+        "discretization": args.method,
+        "step": period,
+        "pendulum": args.pendulum,
+        "cart": args.cart,
+        "calibration": args.calibration or "default",
+        "parameters": params.as_dict(),
+        "port": args.port,
+        "rig_boot_id": identity.boot_id,
+    }
+    metrics, timing = write_lab_results(session, Lp=params.Lp, q_alpha=1.0 / identity.pend_counts_per_rad, meta=meta, round_trips=round_trips)
+    if args.plot:
+        from pendulab.analysis.plots import plot_run
+        from pendulab.analysis.results import read_run
+
+        columns, _ = read_run(out_dir)
+        plot_run(columns, out_dir, title=f"rig, {args.pendulum} pendulum", poke_start=metrics.get("poke_start_detected_s") or 0.0)
+    if args.compare:
+        from pendulab.hil.compare import compare_with_simulation
+
+        compare_with_simulation(out_dir, controller, params, delay=delay, method=args.method, metrics=metrics)
+    lat = timing["answer_latency_ms"]
+    say(f"session: {timing['samples']} samples, answer latency p50 {lat['p50'] or 0:.3f} ms, p99 {lat['p99'] or 0:.3f} ms, "
+        f"{timing['late_commands']} late, {timing['missed_samples']} missed, {timing['crc_errors']} CRC errors")
+    say(f"results in {out_dir}/ (rig_log.csv, run.mat, run.csv, metrics.json, timing.json); ended: {reason}")
+    return status

@@ -1,0 +1,127 @@
+"""``pendulab rig-emulator``: a rig on a pseudo-terminal (Plant.fmu speaking the rig protocol in real time)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+from pathlib import Path
+
+from pendulab.cli.options import add_plant_options, plant_parameters_from_args
+from pendulab.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "rig-emulator",
+        help="a virtual rig on a serial port (pseudo-terminal), for 'pendulab lab' without hardware",
+        description=(
+            "Run Plant.fmu behind a pseudo-terminal, speaking the rig protocol (docs/protocol.md) in real time, with "
+            "the rig's watchdog and track limits. Prints the port's path alone on the first line of stdout, then runs "
+            "until stopped (Ctrl-C); every change of state is one line on stderr. The pendulum hangs down at start."
+        ),
+        epilog=(
+            "examples:\n"
+            "  pendulab rig-emulator --raise-after 2 --poke 220,0.005,1\n"
+            "  pendulab rig-emulator --latency 1 --jitter 0.3          # a USB-serial bridge\n"
+            "  pendulab rig-emulator --pendulum none --friction 2,0.004,3.5,0.04,25   # for 'pendulab calibrate --port'\n"
+            "  pendulab rig-emulator --tcp 5555                        # serve socket://127.0.0.1:5555 (Windows)"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_plant_options(parser, pendulums=("long", "short", "none"))
+    parser.add_argument("--friction", metavar="F1,v1,F2,v2,B", help="the rig's true friction vector (overrides the calibration)")
+    person = parser.add_argument_group("what a person does")
+    person.add_argument("--raise-after", type=float, metavar="S", help="raise the pendulum by hand S s after the host connects (held until the motor is enabled)")
+    person.add_argument("--poke", metavar="MAG,DUR,START", help="poke (rad/s^2, s, s); START counts from the moment the controller takes the pendulum")
+    link = parser.add_argument_group("what a real link and rig do")
+    link.add_argument("--latency", type=float, default=0.0, metavar="MS", help="added host->rig latency in ms (default 0)")
+    link.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="uniform +- jitter on that latency in ms")
+    link.add_argument("--byte-error-rate", type=float, default=0.0, metavar="P", help="probability of a bit flip in each byte, both directions")
+    link.add_argument("--restart-after", type=float, metavar="S", help="reset the firmware (new boot id) S s after the host connects")
+    link.add_argument("--stall-after", type=float, metavar="S", help="stall the link S s after the host connects")
+    link.add_argument("--stall-for", type=float, default=0.5, metavar="S", help="length of the stall (default 0.5 s)")
+    link.add_argument("--close-after", type=float, metavar="S", help="close the port S s after the host connects")
+    parser.add_argument("--tcp", type=int, metavar="PORT", help="serve one host on TCP 127.0.0.1:PORT instead of a pty (prints socket://...)")
+    parser.add_argument("--firmware", nargs="?", const="", metavar="HEX",
+                        help="run the real firmware in simavr with the digital twin instead (default: the .hex 'make -C firmware' builds)")
+    parser.add_argument("--seed", type=int, help="random seed (byte errors, jitter, boot id)")
+    parser.set_defaults(func=run)
+
+
+def _non_negative(value: float | None, option: str) -> None:
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        raise UserError(f"{option} {value} must be a number >= 0")
+
+
+def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
+    """The emulator's options from the parsed command line (also used by tests)."""
+    from pendulab.cli.simulate import parse_poke
+    from pendulab.hil.emulator import EmulatorOptions
+
+    for option in ("raise_after", "latency", "jitter", "restart_after", "stall_after", "stall_for", "close_after"):
+        _non_negative(getattr(args, option), "--" + option.replace("_", "-"))
+    if not 0 <= args.byte_error_rate < 0.5:
+        raise UserError(f"--byte-error-rate {args.byte_error_rate} must be a probability from 0 to below 0.5, e.g. 1e-3")
+    params = plant_parameters_from_args(args)
+    if args.friction:
+        from pendulab.cli.calibrate import _friction
+
+        try:
+            values = _friction(args.friction)
+        except argparse.ArgumentTypeError as exc:
+            raise UserError(f"--friction {exc}") from None
+        params = params.with_values(**dict(zip(("F1", "v1", "F2", "v2", "B"), values)))
+    return EmulatorOptions(
+        params=params,
+        raise_after=args.raise_after,
+        poke=parse_poke(args.poke) if args.poke else None,
+        latency=args.latency / 1000.0,
+        jitter=args.jitter / 1000.0,
+        byte_error_rate=args.byte_error_rate,
+        restart_after=args.restart_after,
+        stall_after=args.stall_after,
+        stall_for=args.stall_for,
+        close_after=args.close_after,
+        seed=args.seed,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.firmware is not None:
+        try:
+            from pendulab.hil.firmware import run_twin
+        except ImportError:
+            raise UserError("--firmware needs the firmware twin (pendulab.hil.firmware), which this installation lacks") from None
+        passthrough = [a for a in sys.argv[2:] if not a.startswith("--firmware")]
+        return run_twin(Path(args.firmware) if args.firmware else None, passthrough)
+    options = emulator_options(args)
+    if sys.platform == "win32" and args.tcp is None:
+        raise UserError("pseudo-terminals do not exist on Windows: use --tcp PORT and 'pendulab lab --port socket://127.0.0.1:PORT'")
+    from pendulab.hil.emulator import RigEmulator
+
+    emulator = RigEmulator(options)
+    signal.signal(signal.SIGTERM, lambda *_: emulator.stop())
+    listener = None
+    try:
+        if args.tcp is not None:
+            import socket
+
+            listener = socket.create_server(("127.0.0.1", args.tcp))
+            print(f"socket://127.0.0.1:{listener.getsockname()[1]}", flush=True)
+            connection, _ = listener.accept()
+            connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            emulator.use_socket(connection)
+        else:
+            print(emulator.open_pty(), flush=True)
+        emulator.say("rig emulator ready: pendulum hanging, cart centred, motor off")
+        why = emulator.run()
+        emulator.say(f"emulator ends ({why})")
+    except KeyboardInterrupt:
+        emulator.say("emulator stopped (Ctrl-C)")
+    finally:
+        emulator.close()
+        if listener is not None:
+            listener.close()
+    return 0

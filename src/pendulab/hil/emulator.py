@@ -1,0 +1,464 @@
+"""The rig emulator: Plant.fmu behind a serial port, speaking protocol v1 in real time.
+
+It is a rig as ``docs/protocol.md`` describes one: its own clock samples the encoders every period,
+the answer to sample k is applied at tick k + N, the watchdog drops the motor to 0 V, the track
+limits are enforced, the encoders are quantized 16-bit counters that wrap. Around it, what a person
+and a real link do: the pendulum hangs at start and is raised by hand (``raise_after``), a poke, link
+latency and jitter, byte errors, a restart, a stall, the port closing.
+
+Examples
+--------
+>>> from pendulab.hil.emulator import EmulatorOptions, RigEmulator
+>>> emulator = RigEmulator(EmulatorOptions(raise_after=1.0))       # doctest: +SKIP
+>>> print(emulator.open_pty())                                     # doctest: +SKIP
+/dev/pts/7
+>>> emulator.run()                                                 # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from pendulab.hil import protocol as P
+from pendulab.model.parameters import PlantParameters
+
+FIRMWARE_VERSION = (1, 0, 0)
+#: Answers kept for the transport delay (protocol: at least max_delay + 1 slots).
+RING = 16
+MAX_DELAY = 8
+#: The rig's own track limit before the host configures one (m from the zero).
+DEFAULT_TRACK_LIMIT = 0.45
+#: The angle from upright (rad) at which the person holds the pendulum until the controller has it.
+HOLD_ANGLE = math.radians(0.5)
+
+
+@dataclass
+class EmulatorOptions:
+    """What the emulated rig is, and what happens around it.
+
+    Times ``raise_after``, ``restart_after``, ``stall_after`` and ``close_after`` count from the
+    moment the host connects (its first IDENTIFY); the poke's start counts from the moment the
+    controller takes the pendulum (the first enabled command after the raise).
+    """
+
+    params: PlantParameters = field(default_factory=PlantParameters.preset)
+    period: float = 1e-3
+    raise_after: float | None = None
+    poke: tuple[float, float, float] | None = None
+    latency: float = 0.0          # s, added to the host -> rig direction (the round trip grows by it)
+    jitter: float = 0.0           # s, uniform +- on that latency
+    byte_error_rate: float = 0.0  # probability that a byte (either direction) has one bit flipped
+    restart_after: float | None = None
+    stall_after: float | None = None
+    stall_for: float = 0.5
+    close_after: float | None = None
+    cart_step: float = 22.75e-6                  # m per count
+    pendulum_counts_per_rev: int = 4096
+    seed: int | None = None
+
+
+class _Plant:
+    """Plant.fmu in Co-Simulation with cached C entry points; its state can be set (a hand)."""
+
+    def __init__(self, params: PlantParameters, period: float) -> None:
+        from pendulab.cosim.master import _Instance
+        from pendulab.fmu.build import ensure_fmu
+
+        self._tmp: list[str] = []
+        self.inst = _Instance("rig", ensure_fmu("Plant"), self._tmp)
+        self.params = params
+        self.period = period
+        self.t = 0.0
+        self._v = self.inst.port(["V"])
+        self._state = self.inst.port(["x", "xdot", "alpha", "alphadot", "V_applied"])
+        self._live = False
+
+    def start(self, t: float, state: tuple[float, float, float, float], **changes: float) -> None:
+        """(Re)initialize at time ``t`` in ``state`` (x, xdot, alpha, alphadot), parameters changed by ``changes``."""
+        fmu = self.inst.fmu
+        if self._live:
+            fmu.reset()
+        fmu.setupExperiment(startTime=t)
+        params = self.params.with_values(**changes) if changes else self.params
+        for name, value in params.as_dict().items():
+            self.inst.set_value(name, value)
+        for name, value in zip(("x", "xdot", "alpha", "alphadot"), state):
+            self.inst.set_value(name, value)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        self._live = True
+        self.t = t
+
+    def step(self, voltage: float) -> None:
+        self._v.values["Real"][0] = voltage
+        self.inst.write(self._v)
+        if self.inst.do_step(self.inst.handle, self.t, self.period, 1) > 1:
+            raise RuntimeError(f"the plant FMU failed at t={self.t:.3f} s")
+        self.t += self.period
+
+    def state(self) -> tuple[float, float, float, float, float]:
+        self.inst.read(self._state)
+        return tuple(self._state.values["Real"])  # type: ignore[return-value]
+
+    def close(self) -> None:
+        import shutil
+
+        try:
+            self.inst.fmu.freeInstance()
+        finally:
+            for d in self._tmp:
+                shutil.rmtree(d, ignore_errors=True)
+
+
+class RigEmulator:
+    """One emulated rig. Call :meth:`open_pty` (or give ``read``/``write`` functions), then :meth:`run`."""
+
+    def __init__(self, options: EmulatorOptions, *, announce: Callable[[str], None] | None = None) -> None:
+        self.o = options
+        if not 0 <= options.byte_error_rate < 1:
+            raise ValueError("byte error rate must be in [0, 1)")
+        self.rng = random.Random(options.seed)
+        self.announce_line = announce or (lambda text: print(text, file=sys.stderr, flush=True))
+        params = options.params.with_values(q_alpha=0.0, q_x=0.0, poke_magnitude=0.0)
+        self.plant = _Plant(params, options.period)
+        self.counts_per_m = 1.0 / options.cart_step
+        self.counts_per_rad = options.pendulum_counts_per_rev / (2 * math.pi)
+        self.fd: int | None = None
+        self._slave_fd: int | None = None
+        self._read: Callable[[], bytes] | None = None
+        self._write: Callable[[bytes], None] | None = None
+        self._stop = False
+        self.connected_at: float | None = None
+        self.held = False
+        self.raised = False
+        self._boot()
+        # The pendulum hangs at rest, the cart at the centre.
+        self.plant.start(0.0, (0.0, 0.0, math.pi, 0.0))
+
+    # ------------------------------------------------------------------ set-up
+    def _boot(self) -> None:
+        """Power-on or reset state of the firmware: not streaming, 0 V, a new boot id."""
+        self.boot_id = self.rng.getrandbits(32)
+        self.seq = 0
+        self.streaming = False
+        self.period_us = int(round(self.o.period * 1e6))
+        self.watchdog_ms = 20
+        self.delay = 1
+        self.x_min = -int(DEFAULT_TRACK_LIMIT * self.counts_per_m)
+        self.x_max = int(DEFAULT_TRACK_LIMIT * self.counts_per_m)
+        self.v_max_mv = 10000
+        self.zero_cart = 0
+        self.zero_pend = 0
+        self.tick = 0
+        self.voltage = 0.0
+        self.enabled = False
+        self.wd_tripped = False
+        self.limit_hit = False
+        self.fault = False
+        self.late = 0
+        self.applied = 0
+        self.last_command_time: float | None = None
+        self.ring: list[P.Command | None] = [None] * RING
+        self.sample_seqs: deque[int] = deque(maxlen=RING)
+        self.reader = P.FrameReader()
+        self._incoming: deque[tuple[float, bytes]] = deque()
+        self._last_delivery = 0.0
+
+    def open_pty(self) -> str:
+        """Create the pseudo-terminal and return the path a host opens (POSIX only)."""
+        import pty
+        import tty
+
+        master, slave = pty.openpty()
+        tty.setraw(slave)
+        os.set_blocking(master, False)
+        self.fd, self._slave_fd = master, slave  # the slave stays open here so the master never sees EIO
+        self.path = os.ttyname(slave)
+
+        def read() -> bytes:
+            try:
+                return os.read(master, 4096)
+            except BlockingIOError:
+                return b""
+
+        def write(data: bytes) -> None:
+            view = memoryview(data)
+            while view:
+                try:
+                    n = os.write(master, view)
+                    view = view[n:]
+                except BlockingIOError:
+                    # Nobody reads the port (host gone): drop, as a UART with no listener does.
+                    return
+
+        self._read, self._write = read, write
+        return self.path
+
+    def use_socket(self, sock: Any) -> None:
+        """Serve one connected TCP socket instead of a pty (the Windows path: ``socket://HOST:PORT``)."""
+        sock.setblocking(False)
+
+        def read() -> bytes:
+            try:
+                data = sock.recv(4096)
+            except BlockingIOError:
+                return b""
+            if not data:
+                raise ConnectionError("the host closed the connection")
+            return data
+
+        def write(data: bytes) -> None:
+            try:
+                sock.sendall(data)
+            except (BlockingIOError, OSError):
+                pass
+
+        self._read, self._write = read, write
+
+    def close(self) -> None:
+        for fd in (self.fd, self._slave_fd):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.fd = self._slave_fd = None
+        self.plant.close()
+
+    def stop(self) -> None:
+        self._stop = True
+
+    # ------------------------------------------------------------------ announcements
+    def say(self, text: str) -> None:
+        self.announce_line(f"[rig {self.plant.t:8.3f} s] {text}")
+
+    # ------------------------------------------------------------------ link
+    def _corrupt(self, data: bytes) -> bytes:
+        p = self.o.byte_error_rate
+        if p <= 0 or not data:
+            return data
+        out = bytearray(data)
+        for i in range(len(out)):
+            if self.rng.random() < p:
+                out[i] ^= 1 << self.rng.randrange(8)
+        return bytes(out)
+
+    def send(self, frame: P.Frame) -> None:
+        assert self._write is not None
+        self._write(self._corrupt(P.encode(frame)))
+
+    def _next_seq(self) -> int:
+        s = self.seq
+        self.seq = (self.seq + 1) & 0xFFFF
+        return s
+
+    def _receive(self, now: float) -> list[P.Frame]:
+        """Bytes from the host, delivered after the link's latency (in order, as a serial line does)."""
+        assert self._read is not None
+        data = self._read()
+        if data:
+            delay = self.o.latency + (self.rng.uniform(-self.o.jitter, self.o.jitter) if self.o.jitter else 0.0)
+            at = max(now + max(delay, 0.0), self._last_delivery)
+            self._last_delivery = at
+            self._incoming.append((at, self._corrupt(data)))
+        frames: list[P.Frame] = []
+        while self._incoming and self._incoming[0][0] <= now:
+            frames += self.reader.feed(self._incoming.popleft()[1])
+        return frames
+
+    # ------------------------------------------------------------------ the firmware's logic
+    def _handle(self, frame: P.Frame, now: float) -> None:
+        if isinstance(frame, P.Identify):
+            if self.connected_at is None:
+                self.connected_at = now
+                self.say("host connected")
+            self.send(P.Identity(
+                self._next_seq(), P.PROTOCOL_VERSION, *FIRMWARE_VERSION, self.boot_id, self.period_us,
+                self.counts_per_m, self.counts_per_rad, self.v_max_mv, self.x_min, self.x_max,
+                self.watchdog_ms, MAX_DELAY, 16,
+            ))
+        elif isinstance(frame, P.Configure):
+            ok = (frame.period_us == self.period_us and 1 <= frame.watchdog_ms <= 60000 and 1 <= frame.delay <= MAX_DELAY
+                  and frame.x_min < frame.x_max and 0 < frame.v_max_mv <= 10000)
+            if ok:
+                self.watchdog_ms, self.delay = frame.watchdog_ms, frame.delay
+                self.x_min, self.x_max, self.v_max_mv = frame.x_min, frame.x_max, frame.v_max_mv
+                self.say(f"configured: period {self.period_us} us, delay N = {self.delay}, watchdog {self.watchdog_ms} ms, "
+                         f"track {self.x_min / self.counts_per_m:+.3f} .. {self.x_max / self.counts_per_m:+.3f} m")
+            self.send(P.Ack(self._next_seq(), P.Configure.TYPE, P.ACK_OK if ok else P.ACK_RANGE))
+        elif isinstance(frame, P.Zero):
+            x, _, alpha, _, _ = self.plant.state()
+            if frame.which & P.ZERO_CART:
+                self.zero_cart = self._cart_raw(x)
+            if frame.which & P.ZERO_PENDULUM:
+                self.zero_pend = self._pend_raw(alpha)
+            self.send(P.Ack(self._next_seq(), P.Zero.TYPE, P.ACK_OK))
+        elif isinstance(frame, P.Stream):
+            if frame.on and not self.streaming:
+                self.streaming, self.tick, self.late = True, 0, 0
+                self.ring = [None] * RING
+                self.sample_seqs.clear()
+                self.last_command_time = now
+                self.say("streaming samples")
+            elif not frame.on and self.streaming:
+                self.streaming = False
+                self._disable("streaming stopped by the host")
+            self.send(P.Ack(self._next_seq(), P.Stream.TYPE, P.ACK_OK))
+        elif isinstance(frame, P.Command):
+            self.ring[frame.answers % RING] = frame
+            self.last_command_time = now
+
+    def _cart_raw(self, x: float) -> int:
+        return int(math.floor(x * self.counts_per_m + 0.5))
+
+    def _pend_raw(self, alpha: float) -> int:
+        # The encoder reads the angle from hanging (theta = alpha - pi), counter-clockwise positive.
+        return int(math.floor((alpha - math.pi) * self.counts_per_rad + 0.5))
+
+    def _disable(self, why: str) -> None:
+        if self.enabled or self.voltage != 0.0:
+            self.say(f"motor off: {why}")
+        self.enabled = False
+        self.voltage = 0.0
+
+    def _tick(self, now: float) -> None:
+        """One period of the firmware: choose and apply the voltage, send the sample."""
+        x, _, alpha, _, _ = self.plant.state()
+        if self.held:
+            alpha = HOLD_ANGLE
+        cart = self._cart_raw(x) - self.zero_cart
+        pend = self._pend_raw(alpha) - self.zero_pend
+        status_late = 0
+        due: P.Command | None = None
+        if len(self.sample_seqs) >= self.delay:
+            want = self.sample_seqs[-self.delay]
+            cmd = self.ring[want % RING]
+            if cmd is not None and cmd.answers == want:
+                due = cmd
+            else:
+                self.late = (self.late + 1) & 0xFFFF
+                status_late = P.ST_LATE
+        if due is not None:
+            self.applied = due.answers
+            if due.flags & P.CLEAR and (self.wd_tripped or self.limit_hit):
+                self.wd_tripped = self.limit_hit = False
+                self.say("watchdog and limit flags cleared by the host")
+            if due.flags & P.ENABLE and not (self.wd_tripped or self.limit_hit or self.fault):
+                if not self.enabled:
+                    self.say("motor enabled")
+                self.enabled = True
+                limit = self.v_max_mv / 1000.0
+                self.voltage = max(-limit, min(limit, due.voltage_mv / 1000.0))
+            elif self.enabled:
+                self._disable("the host disabled the amplifier")
+        # The second, independent safety layer: watchdog and track limits.
+        if self.last_command_time is not None and now - self.last_command_time > self.watchdog_ms / 1000.0 and not self.wd_tripped:
+            self.wd_tripped = True
+            self._disable(f"watchdog tripped: no valid command for {self.watchdog_ms} ms -> 0 V")
+        full_cart = cart
+        if not self.limit_hit and not (self.x_min <= full_cart <= self.x_max):
+            self.limit_hit = True
+            self._disable(f"track limit hit at x = {full_cart / self.counts_per_m:+.3f} m -> 0 V")
+        if self.wd_tripped or self.limit_hit or self.fault:
+            self.enabled, self.voltage = False, 0.0
+        if self.enabled and self.held and self.voltage != 0.0:
+            self._release()
+        status = ((P.ST_ENABLED if self.enabled else 0) | (P.ST_WATCHDOG if self.wd_tripped else 0)
+                  | (P.ST_LIMIT if self.limit_hit else 0) | (P.ST_FAULT if self.fault else 0) | status_late)
+        seq = self._next_seq()
+        self.sample_seqs.append(seq)
+        self.send(P.Sample(seq, self.tick & 0xFFFFFFFF, cart & 0xFFFF, pend & 0xFFFF, int(round(self.voltage * 1000)),
+                           status, self.late, self.applied))
+        self.tick += 1
+
+    # ------------------------------------------------------------------ the person
+    def _raise(self) -> None:
+        self.held = True
+        self.raised = True
+        self.say(f"pendulum raised by hand to {math.degrees(HOLD_ANGLE):.1f} deg from upright; held until the motor is enabled")
+
+    def _release(self) -> None:
+        """The controller has it: the hand lets go (the plant restarts from the held state)."""
+        x, xdot, _, _, _ = self.plant.state()
+        changes: dict[str, float] = {}
+        if self.o.poke is not None:
+            mag, dur, start = self.o.poke
+            changes = {"poke_magnitude": mag, "poke_duration": dur, "poke_start": self.plant.t + start}
+            self.say(f"hand released, the controller has the pendulum; poke {mag:g} rad/s^2 for {dur:g} s at t = {self.plant.t + start:.3f} s")
+        else:
+            self.say("hand released, the controller has the pendulum")
+        self.plant.start(self.plant.t, (x, xdot, HOLD_ANGLE, 0.0), **changes)
+        self.held = False
+
+    # ------------------------------------------------------------------ the loop
+    def run(self, duration: float | None = None) -> str:
+        """Run in real time until stopped (or for ``duration`` s); returns why it ended."""
+        assert self._read is not None, "open_pty() or use_socket() first"
+        period = self.o.period
+        stalled_until = -1.0
+        stalled_said = False
+        t0 = time.perf_counter()
+        next_tick = t0
+        k = 0
+        while not self._stop:
+            # Sleep to just before the tick, then spin: time.sleep alone wakes 50-100 us late.
+            now = time.perf_counter()
+            if next_tick - now > 4e-4:
+                time.sleep(next_tick - now - 3e-4)
+            while time.perf_counter() < next_tick:
+                pass
+            now = time.perf_counter() - t0
+            if duration is not None and now >= duration:
+                return "duration"
+            since = None if self.connected_at is None else now - self.connected_at
+            if since is not None:
+                if self.o.close_after is not None and since >= self.o.close_after:
+                    self.say("closing the port (--close-after)")
+                    return "closed"
+                if self.o.restart_after is not None and since >= self.o.restart_after:
+                    self.o.restart_after = None
+                    self._boot()
+                    self.connected_at = now
+                    self.say(f"restart: firmware reset, new boot id {self.boot_id:#010x}, motor off")
+                if self.o.stall_after is not None and since >= self.o.stall_after:
+                    self.o.stall_after = None
+                    stalled_until = now + self.o.stall_for
+                    self.say(f"link stalled for {self.o.stall_for:g} s (--stall-after)")
+                    stalled_said = True
+                if self.o.raise_after is not None and not self.raised and since >= self.o.raise_after:
+                    self._raise()
+            if now < stalled_until:
+                pass  # nothing crosses the link; the rig's own clock and watchdog go on
+            else:
+                if stalled_said:
+                    self.say("link back")
+                    stalled_said = False
+                try:
+                    frames = self._receive(now)
+                except ConnectionError:
+                    self.say("host disconnected")
+                    return "disconnected"
+                for frame in frames:
+                    self._handle(frame, now)
+            if self.streaming:
+                if now < stalled_until:
+                    # Samples are taken but lost on the stalled link; the watchdog still runs.
+                    if self.last_command_time is not None and now - self.last_command_time > self.watchdog_ms / 1000.0 and not self.wd_tripped:
+                        self.wd_tripped = True
+                        self._disable(f"watchdog tripped: no valid command for {self.watchdog_ms} ms -> 0 V")
+                    self.tick += 1
+                else:
+                    self._tick(now)
+            self.plant.step(self.voltage)
+            k += 1
+            next_tick += period
+            if time.perf_counter() - next_tick > 0.05:  # suspended (debugger, overload): do not race to catch up
+                next_tick = time.perf_counter()
+        return "stopped"

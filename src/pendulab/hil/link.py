@@ -1,0 +1,240 @@
+"""The host's end of the serial link: open, identify, configure, stream, answer (protocol v1).
+
+Examples
+--------
+>>> with RigLink.open("/dev/ttyACM0") as link:                       # doctest: +SKIP
+...     identity = link.identify()
+...     link.configure(delay=1)
+...     link.stream(True)
+...     sample, received_at = link.next_sample(timeout=0.1)
+...     link.command(sample.seq, 0.0, enable=False)
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from typing import Any
+
+from pendulab.errors import UserError
+from pendulab.hil import protocol as P
+
+
+class LinkLost(Exception):
+    """The port failed or went silent; the message says how."""
+
+
+class RigRestarted(Exception):
+    """The rig reset during a session (new boot id or its tick went back)."""
+
+
+class RigLink:
+    """A rig on a pyserial port (a device, ``socket://HOST:PORT``, ``loop://``).
+
+    Attributes
+    ----------
+    reader : FrameReader
+        Counts rejected frames (``errors``) and frames lost by sequence number (``lost``).
+    """
+
+    def __init__(self, serial_port: Any, name: str) -> None:
+        self.port = serial_port
+        self.name = name
+        self.reader = P.FrameReader()
+        self.seq = 0
+        self.identity: P.Identity | None = None
+        self._frames: deque[tuple[P.Frame, float]] = deque()
+        self.bytes_in = 0
+
+    @classmethod
+    def open(cls, port: str, baud: int = P.DEFAULT_BAUD) -> "RigLink":
+        import serial
+
+        try:
+            handle = serial.serial_for_url(port, baudrate=baud, timeout=0.05, write_timeout=0.5, do_not_open=True)
+            if hasattr(handle, "exclusive") and not port.startswith(("socket://", "loop://", "rfc2217://")):
+                try:
+                    handle.exclusive = True  # two programs on one rig would fight over the motor
+                except (ValueError, NotImplementedError):
+                    pass
+            handle.open()
+        except (serial.SerialException, ValueError, OSError) as exc:
+            text = str(exc).split("\n")[0]
+            raise UserError(
+                f"cannot open port {port!r}: {text}; give the rig's port (COM3 on Windows, /dev/ttyACM0 or /dev/ttyUSB0 on "
+                f"Linux, socket://HOST:PORT for a rig on another machine)"
+            ) from None
+        return cls(handle, port)
+
+    def close(self) -> None:
+        try:
+            self.port.close()
+        except Exception:  # noqa: BLE001 - closing a dead port must not hide why it died
+            pass
+
+    def __enter__(self) -> "RigLink":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ bytes and frames
+    def send(self, frame_type: type[P.Frame], **fields: Any) -> None:
+        frame = frame_type(self.seq, **fields)
+        self.seq = (self.seq + 1) & 0xFFFF
+        try:
+            self.port.write(P.encode(frame))
+        except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError, ...
+            raise LinkLost(f"link lost: writing to {self.name} failed ({exc})") from None
+
+    def _pump(self, timeout: float) -> None:
+        """Read what has arrived (waiting up to ``timeout`` for the first byte) into the frame queue."""
+        port = self.port
+        try:
+            port.timeout = timeout
+            data = port.read(max(1, port.in_waiting))
+        except Exception as exc:  # noqa: BLE001
+            raise LinkLost(f"link lost: reading from {self.name} failed ({str(exc).splitlines()[0]})") from None
+        if data:
+            now = time.perf_counter()
+            self.bytes_in += len(data)
+            for frame in self.reader.feed(data):
+                self._frames.append((frame, now))
+
+    def next_frame(self, timeout: float) -> tuple[P.Frame, float] | None:
+        """The next valid frame and the time (perf_counter) its last byte was read, or None after ``timeout``."""
+        deadline = time.perf_counter() + timeout
+        while not self._frames:
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                return None
+            self._pump(left)
+        return self._frames.popleft()
+
+    def next_sample(self, timeout: float) -> tuple[P.Sample, float] | None:
+        """The next SAMPLE (other frames in between are dropped), or None after ``timeout``."""
+        deadline = time.perf_counter() + timeout
+        while True:
+            item = self.next_frame(max(0.0, deadline - time.perf_counter()))
+            if item is None:
+                return None
+            if isinstance(item[0], P.Sample):
+                return item  # type: ignore[return-value]
+
+    def _expect(self, kind: type[P.Frame], timeout: float) -> tuple[P.Frame, float] | None:
+        deadline = time.perf_counter() + timeout
+        while True:
+            item = self.next_frame(max(0.0, deadline - time.perf_counter()))
+            if item is None or isinstance(item[0], kind):
+                return item
+
+    # ------------------------------------------------------------------ the session
+    def identify(self, timeout: float = 1.0) -> P.Identity:
+        """Ask who is there; a clear :class:`UserError` if it is not a rig of our protocol."""
+        try:
+            self.port.reset_input_buffer()
+        except Exception:  # noqa: BLE001
+            pass
+        before = self.bytes_in
+        self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
+        item = self._expect(P.Identity, timeout)
+        if item is None:
+            if self.bytes_in > before:
+                raise UserError(
+                    f"{self.name} is not a pendulab rig: it sent {self.bytes_in - before} bytes but no valid frame within "
+                    f"{timeout:g} s; check the port and that the rig runs the pendulab firmware at {self.port.baudrate} baud"
+                )
+            raise UserError(
+                f"no reply from {self.name} within {timeout:g} s; check that the rig is connected and powered, runs the "
+                f"pendulab firmware, and that this is its port"
+            )
+        identity: P.Identity = item[0]  # type: ignore[assignment]
+        if identity.protocol != P.PROTOCOL_VERSION:
+            raise UserError(
+                f"the rig at {self.name} speaks protocol version {identity.protocol}, this pendulab speaks version "
+                f"{P.PROTOCOL_VERSION}; flash the firmware that matches this pendulab (or install the pendulab that matches the rig)"
+            )
+        self.identity = identity
+        return identity
+
+    def round_trips(self, count: int = 20, timeout: float = 0.2) -> list[float]:
+        """Round trips (s) of IDENTIFY -> IDENTITY, for the record (the delay is chosen on samples)."""
+        out = []
+        for _ in range(count):
+            start = time.perf_counter()
+            self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
+            item = self._expect(P.Identity, timeout)
+            if item is not None:
+                out.append(item[1] - start)
+        return out
+
+    def _acked(self, kind: type[P.Frame], timeout: float = 0.5) -> P.Ack:
+        deadline = time.perf_counter() + timeout
+        while True:
+            item = self.next_frame(max(0.0, deadline - time.perf_counter()))
+            if item is None:
+                raise LinkLost(f"link lost: the rig at {self.name} did not acknowledge {kind.__name__.upper()} within {timeout:g} s")
+            frame = item[0]
+            if isinstance(frame, P.Ack) and frame.acked == kind.TYPE:
+                return frame
+
+    def configure(self, *, delay: int, watchdog_ms: int = 20, x_limit: float | None = None, v_max: float = 10.0) -> None:
+        identity = self.identity
+        assert identity is not None, "identify() first"
+        if x_limit is None:
+            x_min, x_max = identity.x_min, identity.x_max
+        else:
+            x_max = int(x_limit * identity.cart_counts_per_m)
+            x_min = -x_max
+        self.send(P.Configure, period_us=identity.period_us, watchdog_ms=watchdog_ms, delay=delay,
+                  x_min=x_min, x_max=x_max, v_max_mv=int(round(v_max * 1000)))
+        ack = self._acked(P.Configure)
+        if ack.result != P.ACK_OK:
+            raise UserError(f"the rig refused the configuration (delay {delay}, watchdog {watchdog_ms} ms, track ±{x_limit} m): result {ack.result}")
+        self.delay = delay
+
+    def zero(self, which: int = P.ZERO_CART | P.ZERO_PENDULUM) -> None:
+        self.send(P.Zero, which=which)
+        self._acked(P.Zero)
+
+    def stream(self, on: bool) -> None:
+        self.send(P.Stream, on=int(on))
+        if on:
+            self._acked(P.Stream)
+        else:
+            try:  # on the way out: the ack is welcome, not needed
+                self._acked(P.Stream, timeout=0.1)
+            except LinkLost:
+                pass
+
+    def command(self, answers: int, voltage: float, *, enable: bool, clear: bool = False) -> None:
+        mv = int(round(max(-32.0, min(32.0, voltage)) * 1000))
+        self.send(P.Command, answers=answers, voltage_mv=mv, flags=(P.ENABLE if enable else 0) | (P.CLEAR if clear else 0))
+
+    def motor_off(self, answers: int = 0) -> None:
+        """Zero volts, amplifier disabled, stream stopped; never raises (used on every way out)."""
+        for action in (lambda: self.command(answers, 0.0, enable=False), lambda: self.stream(False)):
+            try:
+                action()
+            except (LinkLost, Exception):  # noqa: BLE001
+                pass
+
+
+class Encoders:
+    """Unwraps the 16-bit counters of SAMPLE frames into positions in SI units."""
+
+    def __init__(self, identity: P.Identity) -> None:
+        self.m_per_count = 1.0 / identity.cart_counts_per_m
+        self.rad_per_count = 1.0 / identity.pend_counts_per_rad
+        self._cart: int | None = None
+        self._pend: int | None = None
+
+    def update(self, sample: P.Sample) -> tuple[float, float]:
+        """``(x, theta)``: cart position (m) and pendulum angle from hanging (rad)."""
+        if self._cart is None or self._pend is None:
+            self._cart = sample.cart - 0x10000 if sample.cart >= 0x8000 else sample.cart
+            self._pend = sample.pend - 0x10000 if sample.pend >= 0x8000 else sample.pend
+        else:
+            self._cart = P.unwrap16(self._cart, sample.cart)
+            self._pend = P.unwrap16(self._pend, sample.pend)
+        return self._cart * self.m_per_count, self._pend * self.rad_per_count
