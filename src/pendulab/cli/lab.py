@@ -43,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, metavar="DIR", help="run folder (default: a new folder under runs/)")
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
     parser.add_argument("--compare", action="store_true", help="also simulate the same controller at the same delay and write the comparison")
+    parser.add_argument("--poke", metavar="MAG,DUR,START", help="the poke to simulate for --compare (default 50,0.005,1; the rig's poke is detected)")
     parser.set_defaults(func=run)
 
 
@@ -63,6 +64,10 @@ def run(args: argparse.Namespace) -> int:
 
         controller = prompt_controller()
     params = plant_parameters_from_args(args)
+    from pendulab.cli.simulate import POKE_DEFAULT, parse_poke
+
+    poke = parse_poke(args.poke) if args.poke else POKE_DEFAULT
+    params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
     out_dir = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-lab-{args.pendulum}"
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"output folder {out_dir} is a file; give a folder name for --out")

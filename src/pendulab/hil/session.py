@@ -373,7 +373,7 @@ def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: floa
     h = float(np.median(np.diff(ts)))
     w = max(1, int(round(0.005 / h)))
     speed = np.abs(seg[2 * w:] - seg[: -2 * w]) / (ts[2 * w:] - ts[: -2 * w])
-    if speed.size == 0 or speed.max() < 10 * max(q_alpha, 1e-9) / (2 * w * h):
+    if speed.size == 0 or speed.max() < 2 * max(q_alpha, 1e-9) / (2 * w * h):
         return None
     first = int(np.argmax(speed >= 0.5 * speed.max()))
     return float(ts[first + w])

@@ -1,0 +1,196 @@
+"""Rig against simulation: runs aligned at the poke, the old lab's table side by side, an overlay plot.
+
+Examples
+--------
+>>> runs = [load_compared(p) for p in ("runs/sim", "runs/rig")]      # doctest: +SKIP
+>>> print(table_text(runs))                                           # doctest: +SKIP
+>>> nrmse(runs[1], runs[0], "alpha", window=1.0)                      # doctest: +SKIP
+0.031
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from pendulab.errors import UserError
+
+#: The old lab's comparison table: metrics.json key -> (label, unit, scale).
+TABLE = (
+    ("natural_frequency_rad_s", "natural frequency", "rad/s", 1.0),
+    ("peak_time_s", "peak time", "s", 1.0),
+    ("settling_time_s", "settling time", "s", 1.0),
+    ("overshoot_percent", "overshoot", "%", 1.0),
+    ("final_value_rad", "final value", "rad", 1.0),
+    ("cart_speed_change_m_s", "cart speed change", "m/s", 1.0),
+)
+PANELS = (("alpha", "angle (rad)"), ("tip", "tip (m)"), ("x", "cart (m)"), ("voltage", "voltage (V)"))
+
+
+@dataclass
+class ComparedRun:
+    """One run: its columns, where its poke starts, its metrics and a label."""
+
+    label: str
+    columns: dict[str, np.ndarray]
+    poke_start: float
+    metrics: dict[str, Any]
+    source: str
+
+    def aligned(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(t - poke_start, column)``."""
+        return self.columns["t"] - self.poke_start, self.columns[name]
+
+
+def _is_old_lab_folder(path: Path) -> bool:
+    return path.is_dir() and not (path / "run.mat").exists() and not (path / "run.csv").exists() and any(path.glob("*.mat"))
+
+
+def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float = 2 * np.pi / 4096) -> ComparedRun:
+    """A run folder (``pendulab simulate``/``lab``), a run file, or a folder of the old lab's logs."""
+    from pendulab.analysis.metrics import compute_metrics
+    from pendulab.hil.session import detect_poke
+
+    path = Path(path)
+    if not path.exists():
+        raise UserError(f"run {path} does not exist; give a run folder (from 'pendulab simulate' or 'pendulab lab'), its run.mat, or a folder of the old lab's logs")
+    metrics: dict[str, Any] = {}
+    if _is_old_lab_folder(path):
+        try:
+            from pendulab.calibration.logs import read_old_lab_folder
+        except ImportError:
+            raise UserError(f"{path} looks like a folder of the old lab's logs, which this pendulab cannot read yet") from None
+        raw = read_old_lab_folder(path)
+        length = Lp or 0.6413
+        columns = {k: np.asarray(v, dtype=float) for k, v in raw.items()}
+        columns.setdefault("tip", length * columns["alpha"])
+        columns.setdefault("voltage", np.zeros_like(columns["t"]))
+        columns.setdefault("x", np.zeros_like(columns["t"]))
+        meta: dict[str, Any] = {"source": "old lab"}
+        source = "old lab"
+    else:
+        from pendulab.analysis.results import read_run
+
+        columns, meta = read_run(path)
+        folder = path if path.is_dir() else path.parent
+        if (folder / "metrics.json").is_file():
+            try:
+                metrics = json.loads((folder / "metrics.json").read_text())
+            except (OSError, ValueError) as exc:
+                raise UserError(f"cannot read {folder / 'metrics.json'}: {exc}; rewrite it or remove it") from None
+        source = str(meta.get("source", "simulation"))
+    poke = None
+    params = meta.get("parameters") if isinstance(meta.get("parameters"), Mapping) else None
+    if source != "rig" and params and "poke_start" in params and source != "old lab":
+        poke = float(np.ravel(params["poke_start"])[0])
+    if poke is None and metrics.get("poke_start_detected_s") is not None:
+        poke = float(metrics["poke_start_detected_s"])
+    if poke is None:
+        poke = detect_poke(columns["t"], columns["alpha"], q_alpha=q_alpha)
+    if poke is None:
+        raise UserError(f"no poke found in the angle of {path}; a comparison aligns runs at their poke")
+    if not metrics:
+        metrics = compute_metrics(columns["t"], columns["alpha"], poke_start=poke, q_alpha=q_alpha, xdot=columns.get("xdot"))
+    label = f"{path.name or path} ({source})"
+    return ComparedRun(label, columns, poke, metrics, source)
+
+
+def nrmse(run: ComparedRun, reference: ComparedRun, name: str = "alpha", *, window: float = 1.0) -> float:
+    """RMS difference of ``name`` over ``window`` s after the poke, divided by the reference's range there."""
+    t_ref, y_ref = reference.aligned(name)
+    t_run, y_run = run.aligned(name)
+    keep = (t_ref >= 0) & (t_ref <= window) & (t_ref <= t_run[-1])
+    if keep.sum() < 10:
+        raise UserError(f"{run.label} and {reference.label} overlap for less than 10 samples after the poke")
+    y = np.interp(t_ref[keep], t_run, y_run)
+    span = float(np.ptp(y_ref[keep]))
+    if span == 0:
+        raise UserError(f"{reference.label} does not move after its poke; nothing to compare")
+    return float(np.sqrt(np.mean((y - y_ref[keep]) ** 2)) / span)
+
+
+def _fmt(value: Any, unit: str) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "n/a"
+    return f"{value:.4g} {unit}"
+
+
+def table_text(runs: list[ComparedRun]) -> str:
+    """The old lab's table as text: one row per metric, one column per run."""
+    width = max(22, *(len(r.label) + 2 for r in runs))
+    lines = ["".ljust(20) + "".join(r.label.rjust(width) for r in runs)]
+    for key, label, unit, _ in TABLE:
+        lines.append(label.ljust(20) + "".join(_fmt(r.metrics.get(key), unit).rjust(width) for r in runs))
+    if len(runs) >= 2:
+        lines.append("angle NRMSE vs first".ljust(20) + "".join(
+            ("-" if i == 0 else f"{100 * nrmse(r, runs[0]):.1f} %").rjust(width) for i, r in enumerate(runs)))
+    return "\n".join(lines)
+
+
+def plot_comparison(runs: list[ComparedRun], path: Path, *, window: tuple[float, float] = (-0.2, 2.0)) -> Path:
+    """Angle, tip, cart and voltage overlaid (aligned at the poke) above the table; a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pendulab.analysis.results import atomic_write
+
+    fig = plt.figure(figsize=(10, 11))
+    grid = fig.add_gridspec(5, 1, height_ratios=[1, 1, 1, 1, 0.9])
+    for k, (name, ylabel) in enumerate(PANELS):
+        ax = fig.add_subplot(grid[k])
+        for run in runs:
+            t, y = run.aligned(name)
+            keep = (t >= window[0]) & (t <= window[1])
+            ax.plot(t[keep], y[keep], label=run.label, lw=1.2)
+        ax.axvline(0.0, color="k", ls=":", lw=0.8)
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        if name == "voltage":
+            ax.set_ylim(-11, 11)  # the amplifier's range: a runaway command does not flatten the plot
+        if k == 0:
+            ax.legend(loc="upper right", fontsize=8)
+            ax.set_title("aligned at the poke (t = 0)")
+    ax.set_xlabel("time since the poke (s)")
+    table_ax = fig.add_subplot(grid[4])
+    table_ax.axis("off")
+    cells = [[_fmt(r.metrics.get(key), unit) for r in runs] for key, _, unit, _ in TABLE]
+    table = table_ax.table(cellText=cells, rowLabels=[label for _, label, _, _ in TABLE], colLabels=[r.label for r in runs], loc="center")
+    table.auto_set_font_size(False)
+    table.set_fontsize(8)
+    fig.tight_layout()
+    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=90))
+    plt.close(fig)
+    return path
+
+
+def compare_runs(paths: list[str | Path], out_dir: Path, *, Lp: float | None = None) -> tuple[str, list[Path]]:
+    """Load, tabulate and plot; writes ``comparison.txt`` and ``comparison.png`` into ``out_dir``."""
+    from pendulab.analysis.results import atomic_write
+
+    runs = [load_compared(p, Lp=Lp) for p in paths]
+    text = table_text(runs)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    txt = atomic_write(out_dir / "comparison.txt", lambda f: f.write((text + "\n").encode()))
+    png = plot_comparison(runs, out_dir / "comparison.png")
+    return text, [txt, png]
+
+
+def compare_with_simulation(out_dir: Path, controller: Any, params: Any, *, delay: int, method: str, metrics: Mapping[str, Any]) -> str:
+    """``pendulab lab --compare``: the matching simulation into ``out_dir/simulation``, then the comparison."""
+    from pendulab.analysis.results import write_results
+    from pendulab.cosim.pendulum import simulate_poke
+
+    sim_dir = out_dir / "simulation"
+    stop = params.poke_start + 4.0
+    result = simulate_poke(controller, params, stop_time=stop, method=method, delay=delay,
+                           meta={"source": "simulation", "pendulum": "", "calibration": ""})
+    write_results(sim_dir, result.columns, result.meta, result.metrics)
+    text, _ = compare_runs([sim_dir, out_dir], out_dir, Lp=params.Lp)
+    print(text)
+    return text
