@@ -1,0 +1,194 @@
+"""``pendulab lab`` against ``pendulab rig-emulator`` through a real pseudo-terminal: the session, its
+files, the comparison with ``simulate --delay N``, and every fault the issue lists."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+
+import numpy as np
+import pytest
+import scipy.io
+
+from hil_helpers import emulator, lab, lab_process, read_log
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")
+
+POKE = "220,0.005,1"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _fmus():
+    from pendulab.fmu.build import ensure_fmu
+
+    for name in ("Plant", "Controller", "Supervisor"):
+        ensure_fmu(name)
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """One full session: raised, started, poked, 12 s balancing, ended with the end key."""
+    out = tmp_path_factory.mktemp("lab") / "demo"
+    with emulator("--raise-after", "0.3", "--poke", POKE) as emu:
+        proc = lab_process("--port", emu.port, "--demo", "--out", str(out))
+        proc.stdin.write("s\n")  # type: ignore[union-attr]
+        proc.stdin.flush()  # type: ignore[union-attr]
+        emu.wait_for("hand released", timeout=20)
+        time.sleep(12.0)
+        proc.stdin.write("e\n")  # type: ignore[union-attr]
+        proc.stdin.flush()  # type: ignore[union-attr]
+        stdout, stderr = proc.communicate(timeout=30)
+        emu_text = emu.text
+    return out, proc.returncode, stdout, stderr, emu_text
+
+
+def test_demo_session_balances_and_writes_a_complete_run(demo_run):
+    out, status, stdout, stderr, emu_text = demo_run
+    assert status == 0, stderr
+    assert "ended by the operator (e)" in stdout
+    for name in ("rig_log.csv", "run.mat", "run.csv", "metrics.json", "timing.json"):
+        assert (out / name).is_file(), name
+    log = read_log(out / "rig_log.csv")
+    running = log["supervisor_state"] == 2
+    assert running.any()
+    t_run = log["t"][running]
+    assert t_run[-1] - t_run[0] > 11.0  # the controller held it for the whole session
+    assert not (log["supervisor_state"] == 4).any(), "the supervisor tripped"
+    assert np.max(np.abs(log["alpha"][running])) < np.radians(12)
+    # Every sample of the session is in the log, once, in order.
+    assert np.all(np.diff(log["tick"]) == 1)
+    # The metrics come from the rig's log: the poke found where the emulator gave it.
+    metrics = json.loads((out / "metrics.json").read_text())
+    release = log["t"][np.argmax(log["voltage"] != 0)]
+    assert metrics["poke_start_detected_s"] == pytest.approx(release + 1.0, abs=0.02)
+    assert metrics["natural_frequency_rad_s"] is not None and 3 < metrics["natural_frequency_rad_s"] < 20
+    assert metrics["peak_time_s"] is not None and 0.02 < metrics["peak_time_s"] < 0.5
+    mat = scipy.io.loadmat(out / "run.mat", squeeze_me=True, struct_as_record=False)
+    assert mat["t"].size == log.size and mat["meta"].source == "rig"
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["samples"] == log.size and timing["delay_periods"] >= 1
+    assert timing["answer_latency_ms"]["p50"] < 1.0
+    assert "motor enabled" in emu_text
+
+
+def test_rig_run_matches_simulate_with_the_same_delay(demo_run, tmp_path):
+    """Must-show 4: the same controller and poke in simulate --delay N: angle NRMSE < 5 % over 1 s."""
+    from pendulab.cli.main import main
+    from pendulab.hil.compare import load_compared, nrmse
+
+    out = demo_run[0]
+    n = json.loads((out / "timing.json").read_text())["delay_periods"]
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--demo", "--delay", str(n), "--poke", POKE, "--stop-time", "4", "--out", str(sim)]) == 0
+    error = nrmse(load_compared(out), load_compared(sim), "alpha", window=1.0)
+    print(f"angle NRMSE rig emulator vs simulate --delay {n}: {100 * error:.2f} %")
+    assert error < 0.05
+    # The comparison command on the pair: the table and the PNG.
+    assert main(["compare", str(sim), str(out), "--out", str(tmp_path / "cmp")]) == 0
+    png = (tmp_path / "cmp" / "comparison.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "natural frequency" in (tmp_path / "cmp" / "comparison.txt").read_text()
+
+
+def test_watchdog_drops_to_zero_volts_when_the_host_stops_answering():
+    from pendulab.hil import protocol as P
+    from pendulab.hil.link import RigLink
+
+    with emulator() as emu, RigLink.open(emu.port) as link:
+        link.identify()
+        link.configure(delay=1)
+        link.stream(True)
+        last_tick = None
+        for k in range(300):
+            sample, _ = link.next_sample(0.5)
+            link.command(sample.seq, 3.0, enable=True, clear=k == 0)
+            last_tick = sample.tick
+        # Stop answering; watch the applied voltage.
+        zero_tick = None
+        for _ in range(200):
+            sample, _ = link.next_sample(0.5)
+            if sample.voltage_mv == 0:
+                zero_tick = sample.tick
+                assert sample.status & P.ST_WATCHDOG
+                break
+            assert sample.voltage_mv == 3000  # the last voltage is held until the watchdog
+        assert zero_tick is not None
+        # The last answer (to last_tick) arrived within its period: 0 V within 20 ms + one period of it.
+        assert 19 <= zero_tick - last_tick <= 20 + 2
+        emu.wait_for("watchdog tripped")
+
+
+def test_kill_9_of_lab_keeps_every_sample_up_to_100_ms_before(tmp_path):
+    out = tmp_path / "killed"
+    with emulator("--raise-after", "0.2") as emu:
+        proc = lab_process("--port", emu.port, "--demo", "--delay", "1", "--out", str(out))
+        while True:
+            line = proc.stdout.readline()  # type: ignore[union-attr]
+            assert line, proc.stderr.read()  # type: ignore[union-attr]
+            if line.startswith("streaming"):
+                started = time.monotonic()
+                break
+        proc.stdin.write("s\n")  # type: ignore[union-attr]
+        proc.stdin.flush()  # type: ignore[union-attr]
+        time.sleep(2.5)
+        killed = time.monotonic()
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    log = read_log(out / "rig_log.csv")
+    elapsed = killed - started
+    assert log["t"][-1] >= elapsed - 0.100 - 0.02  # 20 ms: the pipe between 'streaming' and this test
+    assert np.all(np.diff(log["tick"]) == 1)
+
+
+def test_emulator_closing_the_port_ends_lab_with_link_lost(tmp_path):
+    out = tmp_path / "lost"
+    with emulator("--raise-after", "0.2", "--close-after", "2.5") as emu:
+        result = lab("--port", emu.port, "--demo", "--delay", "1", "--out", str(out), stdin="s\n")
+    assert result.returncode != 0
+    assert "link lost" in result.stdout
+    meta = scipy.io.loadmat(out / "run.mat", squeeze_me=True, struct_as_record=False)["meta"]
+    assert "link lost" in meta.end_reason
+    assert read_log(out / "rig_log.csv").size > 1000
+
+
+def test_byte_errors_are_counted_and_never_reach_the_controller(tmp_path):
+    out = tmp_path / "noisy"
+    with emulator("--raise-after", "0.2", "--byte-error-rate", "1e-3", "--seed", "7") as emu:
+        result = lab("--port", emu.port, "--demo", "--delay", "1", "--stop-time", "5", "--out", str(out), stdin="s\n")
+    assert result.returncode == 0, result.stdout + result.stderr
+    timing = json.loads((out / "timing.json").read_text())
+    log = read_log(out / "rig_log.csv")
+    assert timing["crc_errors"] > 0
+    # Each corrupt sample frame is a missed sample, counted; the loop ran on through all of them.
+    assert timing["missed_samples"] > 0 and timing["crc_errors"] >= timing["missed_samples"] // 2
+    assert log["t"][-1] >= 5.0
+    assert log["tick"][-1] - log["tick"][0] + 1 == log.size + timing["missed_samples"]
+    # A corrupt frame that got through would show as an impossible jump of the encoders.
+    assert np.max(np.abs(np.diff(log["x"]))) < 2e-3
+    state = log["supervisor_state"]
+    running = (state[1:] == 2) & (state[:-1] == 2)  # (before that the hand raises the pendulum in one step)
+    assert running.sum() > 3000
+    assert np.max(np.abs(np.diff(log["theta"])[running])) < 0.05
+    assert not (log["supervisor_state"] == 4).any()
+
+
+def test_rig_restart_stops_the_motor_and_ends(tmp_path):
+    out = tmp_path / "restart"
+    with emulator("--raise-after", "0.2", "--restart-after", "2.5") as emu:
+        result = lab("--port", emu.port, "--demo", "--delay", "1", "--out", str(out), stdin="s\n")
+        emu.wait_for("restart")
+    assert result.returncode != 0
+    assert "restarted" in result.stdout
+    assert (out / "run.mat").is_file() and (out / "timing.json").is_file()
+
+
+def test_stalled_link_trips_the_rig_watchdog_and_ends_the_session(tmp_path):
+    out = tmp_path / "stall"
+    with emulator("--raise-after", "0.2", "--stall-after", "2.5", "--stall-for", "0.1") as emu:
+        result = lab("--port", emu.port, "--demo", "--delay", "1", "--out", str(out), stdin="s\n", timeout=30)
+        emu.wait_for("watchdog tripped")
+    assert result.returncode != 0
+    assert "watchdog" in result.stdout
