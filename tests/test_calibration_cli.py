@@ -59,7 +59,7 @@ def test_calibrate_prints_progress_per_iteration(capsys, tmp_path):
 @pytest.mark.parametrize(
     "argv, words",
     [
-        (["calibrate"], "hardware-in-the-loop link"),
+        (["calibrate"], "--port PORT for the real rig"),
         (["calibrate", "--virtual", "--friction", "1,2,3"], "needs 5 numbers"),
         (["calibrate", "--virtual", "--friction", "3,0.005,1,0.05,20"], "F1=3 N is above F2"),
         (["calibrate", "--virtual", "--iterations", "0"], "must be at least 1"),

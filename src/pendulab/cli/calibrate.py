@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime as _dt
 import sys
 from pathlib import Path
@@ -23,6 +24,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("--virtual", action="store_true", help="run against the virtual rig (the plant FMU without the pendulum)")
+    parser.add_argument("--port", metavar="PORT", help="run on the rig at this serial port or pyserial URL (COM3, /dev/ttyACM0, socket://HOST:PORT)")
+    parser.add_argument("--baud", type=int, default=921600, metavar="BAUD", help="--port: baud rate (default 921600)")
+    parser.add_argument("--delay", type=int, metavar="N", help="--port: transport delay in periods (default: measured)")
     parser.add_argument("--iterations", type=_positive_int, default=5, metavar="N", help="iterations, each in both directions (default 5)")
     parser.add_argument(
         "--friction", metavar="F1,v1,F2,v2,B", type=_friction,
@@ -83,15 +87,16 @@ def run(args: argparse.Namespace) -> int:
     from pendulab.calibration.logs import write_log
     from pendulab.calibration.ramp import run_ramp_test
 
-    if not args.virtual:
-        raise CalibrationError(
-            "calibrating the real rig needs the hardware-in-the-loop link, which is not available yet; "
-            "use --virtual for the virtual rig"
-        )
+    if args.virtual == bool(args.port):
+        raise CalibrationError("give the rig: --port PORT for the real rig (or 'pendulab rig-emulator'), or --virtual for the virtual rig")
+    if args.port and args.friction:
+        raise CalibrationError("--friction sets the virtual rig's friction; the real rig has its own (drop --friction or use --virtual)")
+    if args.delay is not None and not 1 <= args.delay <= 8:
+        raise CalibrationError(f"--delay {args.delay} must be 1 to 8 periods")
     from pendulab.calibration.rig import VirtualRig
 
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = Path(args.out) if args.out else Path("calibration") / f"{stamp}-virtual.json"
+    out = Path(args.out) if args.out else Path("calibration") / f"{stamp}-{'rig' if args.port else 'virtual'}.json"
     _check_writable(out, "--out")
     if args.log:
         _check_writable(Path(args.log), "--log")
@@ -105,9 +110,32 @@ def run(args: argparse.Namespace) -> int:
     def note(text: str) -> None:
         print(f"  {text}", flush=True)
 
-    with VirtualRig(true, x0=args.x0, backend=args.backend, progress=lambda text: print(text, flush=True)) as rig:
-        print(f"ramp test on the {rig.description}, {args.iterations} iteration(s) (Ctrl-C stops and keeps what was measured)", flush=True)
-        log = run_ramp_test(rig, iterations=args.iterations, on_iteration=announce, on_progress=note)
+    if args.port:
+        from pendulab.hil.link import RigLink
+        from pendulab.hil.rig import HilRig
+        from pendulab.hil.session import choose_delay
+
+        link = RigLink.open(args.port, args.baud)
+        try:
+            identity = link.identify()
+            print(f"rig at {args.port}: firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, boot id {identity.boot_id:#010x}", flush=True)
+            delay = args.delay or choose_delay(link, 4, announce=lambda text: print(text, flush=True))
+            link.configure(delay=delay, x_limit=0.40)
+            print("pendulum removed and cart centred by hand? zeroing the encoders here", flush=True)
+            link.zero()
+            with HilRig(link) as rig:
+                print(f"ramp test on the {rig.description}, {args.iterations} iteration(s) (Ctrl-C stops and keeps what was measured)", flush=True)
+                log = run_ramp_test(rig, iterations=args.iterations, on_iteration=announce, on_progress=note)
+                log = dataclasses.replace(log, V=rig.acting_voltages(len(log.t)))
+            rig_text, true_friction = f"rig at {args.port} (boot id {identity.boot_id:#010x})", None
+        finally:
+            link.close()
+    else:
+        with VirtualRig(true, x0=args.x0, backend=args.backend, progress=lambda text: print(text, flush=True)) as rig:
+            print(f"ramp test on the {rig.description}, {args.iterations} iteration(s) (Ctrl-C stops and keeps what was measured)", flush=True)
+            log = run_ramp_test(rig, iterations=args.iterations, on_iteration=announce, on_progress=note)
+        rig_text = "virtual rig (plant FMU, pendulum removed)" if rig.backend == "fmu" else "virtual rig (CasADi plant, pendulum removed)"
+        true_friction = dict(zip(FRICTION_NAMES, true.friction))
     if args.log:
         write_log(log, args.log)
         print(f"log written to {args.log}")
@@ -118,8 +146,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {text}")
     calibration = estimate.to_calibration(
         date=_dt.datetime.now().isoformat(timespec="seconds"),
-        rig="virtual rig (plant FMU, pendulum removed)" if rig.backend == "fmu" else "virtual rig (CasADi plant, pendulum removed)",
-        rig_true_friction=dict(zip(FRICTION_NAMES, true.friction)),
+        rig=rig_text,
+        **({"rig_true_friction": true_friction} if true_friction else {}),
         iterations=args.iterations,
         interrupted=log.interrupted,
         pendulum=args.pendulum,
