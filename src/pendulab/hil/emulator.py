@@ -17,9 +17,11 @@ Examples
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import random
+import select
 import sys
 import time
 from collections import deque
@@ -133,6 +135,8 @@ class RigEmulator:
         self.fd: int | None = None
         self._slave_fd: int | None = None
         self._read: Callable[[], bytes] | None = None
+        self._fileno: int | None = None
+        self._clock: Callable[[], float] | None = None  # seconds since run() began
         self._write: Callable[[bytes], None] | None = None
         self._stop = False
         self.connected_at: float | None = None
@@ -167,6 +171,7 @@ class RigEmulator:
         self.last_command_time: float | None = None
         self.ring: list[P.Command | None] = [None] * RING
         self.sample_seqs: deque[int] = deque(maxlen=RING)
+        self.sent_at: deque[float] = deque(maxlen=RING)
         self.reader = P.FrameReader()
         self._incoming: deque[tuple[float, bytes]] = deque()
         self._last_delivery = 0.0
@@ -180,6 +185,7 @@ class RigEmulator:
         tty.setraw(slave)
         os.set_blocking(master, False)
         self.fd, self._slave_fd = master, slave  # the slave stays open here so the master never sees EIO
+        self._fileno = master
         self.path = os.ttyname(slave)
 
         def read() -> bytes:
@@ -204,6 +210,7 @@ class RigEmulator:
     def use_socket(self, sock: Any) -> None:
         """Serve one connected TCP socket instead of a pty (the Windows path: ``socket://HOST:PORT``)."""
         sock.setblocking(False)
+        self._fileno = sock.fileno()
 
         def read() -> bytes:
             try:
@@ -259,8 +266,8 @@ class RigEmulator:
         self.seq = (self.seq + 1) & 0xFFFF
         return s
 
-    def _receive(self, now: float) -> list[P.Frame]:
-        """Bytes from the host, delivered after the link's latency (in order, as a serial line does)."""
+    def _pull(self, now: float) -> None:
+        """Read what the host wrote; it reaches the firmware after the link's latency (in order)."""
         assert self._read is not None
         data = self._read()
         if data:
@@ -268,6 +275,10 @@ class RigEmulator:
             at = max(now + max(delay, 0.0), self._last_delivery)
             self._last_delivery = at
             self._incoming.append((at, self._corrupt(data)))
+
+    def _receive(self, now: float) -> list[P.Frame]:
+        """Frames whose bytes have crossed the link by ``now``."""
+        self._pull(now)
         frames: list[P.Frame] = []
         while self._incoming and self._incoming[0][0] <= now:
             frames += self.reader.feed(self._incoming.popleft()[1])
@@ -305,6 +316,7 @@ class RigEmulator:
                 self.streaming, self.tick, self.late = True, 0, 0
                 self.ring = [None] * RING
                 self.sample_seqs.clear()
+                self.sent_at.clear()
                 self.last_command_time = now
                 self.say("streaming samples")
             elif not frame.on and self.streaming:
@@ -340,6 +352,14 @@ class RigEmulator:
         if len(self.sample_seqs) >= self.delay:
             want = self.sample_seqs[-self.delay]
             cmd = self.ring[want % RING]
+            if (cmd is None or cmd.answers != want) and self._clock is not None:
+                # This process, not a rig's timer, may have sent that sample late (an OS scheduling
+                # delay): the host gets its full N periods from when the sample really went out.
+                deadline = self.sent_at[-self.delay] + self.delay * self.o.period
+                while self._clock() < deadline and (cmd is None or cmd.answers != want):
+                    for frame in self._receive(self._clock()):
+                        self._handle(frame, self._clock())
+                    cmd = self.ring[want % RING]
             if cmd is not None and cmd.answers == want:
                 due = cmd
             else:
@@ -374,6 +394,7 @@ class RigEmulator:
                   | (P.ST_LIMIT if self.limit_hit else 0) | (P.ST_FAULT if self.fault else 0) | status_late)
         seq = self._next_seq()
         self.sample_seqs.append(seq)
+        self.sent_at.append(self._clock() if self._clock is not None else now)
         self.send(P.Sample(seq, self.tick & 0xFFFFFFFF, cart & 0xFFFF, pend & 0xFFFF, int(round(self.voltage * 1000)),
                            status, self.late, self.applied))
         self.tick += 1
@@ -404,16 +425,31 @@ class RigEmulator:
         period = self.o.period
         stalled_until = -1.0
         stalled_said = False
+        # No cyclic garbage collection in the real-time loop (see pendulab.hil.session).
+        gc.collect()
+        gc.freeze()
+        gc.disable()
         t0 = time.perf_counter()
+        self._clock = lambda: time.perf_counter() - t0
         next_tick = t0
         k = 0
         while not self._stop:
-            # Sleep to just before the tick, then spin: time.sleep alone wakes 50-100 us late.
-            now = time.perf_counter()
-            if next_tick - now > 4e-4:
-                time.sleep(next_tick - now - 3e-4)
-            while time.perf_counter() < next_tick:
-                pass
+            # Wait for the tick, reading the host's bytes as they come (so that the link's latency counts
+            # from when they were written); sleep to just before the tick, then spin: a sleep alone
+            # wakes 50-100 us late.
+            while True:
+                now = time.perf_counter()
+                left = next_tick - now
+                if left <= 0:
+                    break
+                if left > 3e-4 and self._fileno is not None and now - t0 >= stalled_until:
+                    if select.select([self._fileno], [], [], left - 3e-4)[0]:
+                        try:
+                            self._pull(time.perf_counter() - t0)
+                        except ConnectionError:
+                            pass  # seen again (and handled) at the tick
+                elif left > 3e-4:
+                    time.sleep(left - 3e-4)
             now = time.perf_counter() - t0
             if duration is not None and now >= duration:
                 return "duration"

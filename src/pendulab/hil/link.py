@@ -206,6 +206,8 @@ class RigLink:
                 self._acked(P.Stream, timeout=0.1)
             except LinkLost:
                 pass
+            # Samples sent before the rig stopped belong to the stream that ended, not to the next.
+            self._frames.clear()
 
     def command(self, answers: int, voltage: float, *, enable: bool, clear: bool = False) -> None:
         mv = int(round(max(-32.0, min(32.0, voltage)) * 1000))
