@@ -192,3 +192,17 @@ def test_stalled_link_trips_the_rig_watchdog_and_ends_the_session(tmp_path):
         emu.wait_for("watchdog tripped")
     assert result.returncode != 0
     assert "watchdog" in result.stdout
+
+
+def test_rig_over_tcp_the_path_windows_uses(tmp_path):
+    """``rig-emulator --tcp`` and ``lab --port socket://...``: no pseudo-terminal anywhere."""
+    out = tmp_path / "tcp"
+    with emulator("--tcp", "0", "--raise-after", "0.2", "--poke", POKE) as emu:
+        assert emu.port.startswith("socket://127.0.0.1:")
+        result = lab("--port", emu.port, "--demo", "--stop-time", "3", "--out", str(out), "--plot", stdin="s\n")
+    assert result.returncode == 0, result.stdout + result.stderr
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["samples"] > 2900 and timing["crc_errors"] == 0
+    assert any(p.suffix == ".png" for p in out.iterdir())
+    log = read_log(out / "rig_log.csv")
+    assert (log["supervisor_state"] == 2).sum() > 2000
