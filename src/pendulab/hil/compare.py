@@ -95,7 +95,8 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
         raise UserError(f"no poke found in the angle of {path}; a comparison aligns runs at their poke")
     if not metrics:
         metrics = compute_metrics(columns["t"], columns["alpha"], poke_start=poke, q_alpha=q_alpha, xdot=columns.get("xdot"))
-    label = f"{path.name or path} ({source})"
+    name = path.name if path.is_dir() else f"{path.parent.name}/{path.name}"
+    label = name if name == source else f"{name} ({source})"
     return ComparedRun(label, columns, poke, metrics, source)
 
 
