@@ -206,3 +206,53 @@ def test_rig_over_tcp_the_path_windows_uses(tmp_path):
     assert any(p.suffix == ".png" for p in out.iterdir())
     log = read_log(out / "rig_log.csv")
     assert (log["supervisor_state"] == 2).sum() > 2000
+
+
+def test_rig_fault_ends_the_session_with_the_motor_off(tmp_path):
+    out = tmp_path / "fault"
+    with emulator("--raise-after", "0.2", "--fault-after", "2.0") as emu:
+        result = lab("--port", emu.port, "--demo", "--delay", "1", "--out", str(out), stdin="s\n")
+        emu.wait_for("fault")
+    assert result.returncode != 0 and "fault" in result.stdout
+    meta = scipy.io.loadmat(out / "run.mat", squeeze_me=True, struct_as_record=False)["meta"]
+    assert "fault" in meta.end_reason
+
+
+def test_ctrl_c_turns_the_motor_off_and_keeps_the_log(tmp_path):
+    out = tmp_path / "ctrl_c"
+    with emulator("--raise-after", "0.2") as emu:
+        proc = lab_process("--port", emu.port, "--demo", "--delay", "1", "--out", str(out))
+        proc.stdin.write("s\n")  # type: ignore[union-attr]
+        proc.stdin.flush()  # type: ignore[union-attr]
+        emu.wait_for("motor enabled", timeout=20)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        stdout, _ = proc.communicate(timeout=20)
+        emu.wait_for("motor off")
+    assert proc.returncode == 130 and "interrupted (Ctrl-C)" in stdout
+    assert (out / "run.mat").is_file() and read_log(out / "rig_log.csv").size > 900
+
+
+def test_single_keys_from_a_real_terminal(tmp_path):
+    """On a terminal, s / p / e act as single key presses (no Enter), each announced."""
+    import pexpect
+
+    out = tmp_path / "keys"
+    with emulator("--raise-after", "0.2") as emu:
+        child = pexpect.spawn(sys.executable, ["-m", "pendulab", "lab", "--port", emu.port, "--demo", "--delay", "1", "--out", str(out)],
+                              encoding="utf-8", timeout=30, env={**os.environ, "MPLBACKEND": "Agg"})
+        child.expect("streaming")
+        child.send("s")
+        child.expect(r"key 's': start")
+        child.expect("running")
+        time.sleep(0.5)
+        child.send("p")
+        child.expect(r"key 'p': pause")
+        child.expect("paused")
+        child.send("e")
+        child.expect(r"key 'e': end")
+        child.expect("ended by the operator")
+        child.expect(pexpect.EOF)
+        child.close()
+    assert child.exitstatus == 0
+    assert (out / "metrics.json").is_file()

@@ -43,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     link.add_argument("--stall-after", type=float, metavar="S", help="stall the link S s after the host connects")
     link.add_argument("--stall-for", type=float, default=0.5, metavar="S", help="length of the stall (default 0.5 s)")
     link.add_argument("--close-after", type=float, metavar="S", help="close the port S s after the host connects")
+    link.add_argument("--fault-after", type=float, metavar="S", help="report an amplifier fault S s after the host connects")
     parser.add_argument("--tcp", type=int, metavar="PORT", help="serve one host on TCP 127.0.0.1:PORT instead of a pty (prints socket://...)")
     parser.add_argument("--firmware", nargs="?", const="", metavar="HEX",
                         help="run the real firmware in simavr with the digital twin instead (default: the .hex 'make -C firmware' builds)")
@@ -60,7 +61,7 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
     from pendulab.cli.simulate import parse_poke
     from pendulab.hil.emulator import EmulatorOptions
 
-    for option in ("raise_after", "latency", "jitter", "restart_after", "stall_after", "stall_for", "close_after"):
+    for option in ("raise_after", "latency", "jitter", "restart_after", "stall_after", "stall_for", "close_after", "fault_after"):
         _non_negative(getattr(args, option), "--" + option.replace("_", "-"))
     if not 0 <= args.byte_error_rate < 0.5:
         raise UserError(f"--byte-error-rate {args.byte_error_rate} must be a probability from 0 to below 0.5, e.g. 1e-3")
@@ -84,6 +85,7 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
         stall_after=args.stall_after,
         stall_for=args.stall_for,
         close_after=args.close_after,
+        fault_after=args.fault_after,
         seed=args.seed,
     )
 

@@ -61,6 +61,7 @@ class EmulatorOptions:
     stall_after: float | None = None
     stall_for: float = 0.5
     close_after: float | None = None
+    fault_after: float | None = None
     cart_step: float = 22.75e-6                  # m per count
     pendulum_counts_per_rev: int = 4096
     seed: int | None = None
@@ -468,6 +469,10 @@ class RigEmulator:
                     stalled_until = now + self.o.stall_for
                     self.say(f"link stalled for {self.o.stall_for:g} s (--stall-after)")
                     stalled_said = True
+                if self.o.fault_after is not None and since >= self.o.fault_after and not self.fault:
+                    self.fault = True
+                    self._disable("fault (amplifier fault input) -> 0 V until reset")
+                    self.say("fault")
                 if self.o.raise_after is not None and not self.raised and since >= self.o.raise_after:
                     self._raise()
             if now < stalled_until:
