@@ -224,7 +224,7 @@ class LabSession:
                 if item is None:
                     if time.perf_counter() - silent_since > SILENCE:
                         self._check_rig_after_silence()
-                    if self.keys.poll().count("e") or self._ctrl_c_pending():
+                    if "e" in self.keys.poll():
                         self.reason = "ended by the operator (e) while the rig was silent"
                         status = 0
                         break
@@ -310,9 +310,6 @@ class LabSession:
             timing.lost_frames = self.link.reader.lost
         self.announce(f"motor off; session ended: {self.reason}")
         return self.reason, status
-
-    def _ctrl_c_pending(self) -> bool:
-        return False
 
     def _check_rig_after_silence(self) -> None:
         """Samples stopped: a restarted rig answers with a new boot id; a dead link does not answer."""
