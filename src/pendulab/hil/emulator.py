@@ -341,6 +341,12 @@ class RigEmulator:
         self.enabled = False
         self.voltage = 0.0
 
+    def _check_watchdog(self, now: float) -> None:
+        """No valid command for the watchdog time: 0 V, disabled, latched until a clear."""
+        if self.last_command_time is not None and now - self.last_command_time > self.watchdog_ms / 1000.0 and not self.wd_tripped:
+            self.wd_tripped = True
+            self._disable(f"watchdog tripped: no valid command for {self.watchdog_ms} ms -> 0 V")
+
     def _tick(self, now: float) -> None:
         """One period of the firmware: choose and apply the voltage, send the sample."""
         x, _, alpha, _, _ = self.plant.state()
@@ -380,9 +386,7 @@ class RigEmulator:
             elif self.enabled:
                 self._disable("the host disabled the amplifier")
         # The second, independent safety layer: watchdog and track limits.
-        if self.last_command_time is not None and now - self.last_command_time > self.watchdog_ms / 1000.0 and not self.wd_tripped:
-            self.wd_tripped = True
-            self._disable(f"watchdog tripped: no valid command for {self.watchdog_ms} ms -> 0 V")
+        self._check_watchdog(now)
         full_cart = cart
         if not self.limit_hit and not (self.x_min <= full_cart <= self.x_max):
             self.limit_hit = True
@@ -491,9 +495,7 @@ class RigEmulator:
             if self.streaming:
                 if now < stalled_until:
                     # Samples are taken but lost on the stalled link; the watchdog still runs.
-                    if self.last_command_time is not None and now - self.last_command_time > self.watchdog_ms / 1000.0 and not self.wd_tripped:
-                        self.wd_tripped = True
-                        self._disable(f"watchdog tripped: no valid command for {self.watchdog_ms} ms -> 0 V")
+                    self._check_watchdog(now)
                     self.tick += 1
                 else:
                     self._tick(now)
