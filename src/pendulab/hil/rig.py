@@ -45,7 +45,9 @@ class HilRig(Rig):
         sample: P.Sample = item[0]  # type: ignore[assignment]
         if sample.status & P.ST_FAULT:
             raise CalibrationError("the rig reports a fault; the motor is off")
-        if sample.status & P.ST_WATCHDOG and not self._first:
+        # A flag latched before this test is cleared by the first command, which acts N periods later.
+        settled = self._k > getattr(self.link, "delay", 1) + 1
+        if sample.status & P.ST_WATCHDOG and settled:
             raise CalibrationError("the rig's watchdog tripped (answers stopped reaching it); the motor is off")
         return sample
 
@@ -69,7 +71,7 @@ class HilRig(Rig):
             raise CalibrationError(str(exc)) from None
         self._first = False
         self._pending = self._sample()
-        if self._pending.status & P.ST_LIMIT:
+        if self._pending.status & P.ST_LIMIT and self._k > getattr(self.link, "delay", 1) + 1:
             raise CalibrationError("the rig's own track limit cut the motor; centre the cart and start again")
         self._k += 1
         self.applied.append(self._pending.voltage_mv / 1000.0)
