@@ -135,3 +135,25 @@ def test_existing_run_folder_is_kept_when_the_rig_is_missing(tmp_path):
     (out / "notes.txt").write_text("mine")
     _one_line_exit_2(lab("--port", str(tmp_path / "none"), "--demo", "--out", str(out)))
     assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_lab_refuses_a_link_too_slow_for_any_allowed_delay(tmp_path):
+    with emulator("--latency", "4") as emu:  # 4 ms added: needs N >= 5
+        result = lab("--port", emu.port, "--demo", "--max-delay", "2", "--out", str(tmp_path / "run"))
+        text = emu.text
+    line = _one_line_exit_2(result)
+    assert "too slow" in line and "--max-delay" in line
+    assert "motor enabled" not in text
+
+
+def test_lab_picks_a_longer_delay_behind_a_usb_bridge(tmp_path):
+    """1 ms +- 0.3 ms of added latency: N = 1 cannot hold, lab measures and picks 2 or 3."""
+    from pendulab.hil.link import RigLink
+    from pendulab.hil.session import choose_delay
+
+    with emulator("--latency", "1", "--jitter", "0.3") as emu, RigLink.open(emu.port) as link:
+        link.identify()
+        said: list[str] = []
+        n = choose_delay(link, 4, samples=500, announce=said.append)
+    assert n in (2, 3), said
+    assert "N = 1 is too short" in said[0]
