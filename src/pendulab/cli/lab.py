@@ -89,6 +89,9 @@ def run(args: argparse.Namespace) -> int:
         lti = discretize(controller, h=period, method=args.method)
         supervisor = {"rig_mode": True, "auto_start": False}
         system = pendulum_system(params, lti.to_parameters(), step=period, supervisor=supervisor)
+        from pendulab.hil.realtime import raise_priority
+
+        priority = raise_priority()  # before the delay is measured: the session runs at this priority
         round_trips = link.round_trips()
         try:
             if args.delay is None:
@@ -100,9 +103,10 @@ def run(args: argparse.Namespace) -> int:
             link.zero()
         except LinkLost as exc:
             raise UserError(f"{exc} (while setting up the session)") from None
-        say(f"transport delay N = {delay}; encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
+        say(f"transport delay N = {delay} ({priority}); encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
         with KeySource() as keys:
-            session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say)
+            session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say,
+                                 priority=priority)
             reason, status = session.run()
     meta = {
         "controller": getattr(controller, "describe", lambda: str(controller))(),

@@ -103,7 +103,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("pseudo-terminals do not exist on Windows: use --tcp PORT and 'pendulab lab --port socket://127.0.0.1:PORT'")
     from pendulab.hil.emulator import RigEmulator
 
+    from pendulab.hil.realtime import raise_priority
+
     emulator = RigEmulator(options)
+    emulator.say(f"scheduling: {raise_priority()}")
     signal.signal(signal.SIGTERM, lambda *_: emulator.stop())
     listener = None
     try:

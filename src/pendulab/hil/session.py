@@ -119,6 +119,7 @@ class LabSession:
         Lp: float,
         stop_time: float | None = None,
         announce: Callable[[str], None] = print,
+        priority: str = "normal priority",
     ) -> None:
         self.link = link
         self.identity = link.identity
@@ -132,6 +133,7 @@ class LabSession:
         self.period = self.identity.period_us * 1e-6
         self.timing = Timing()
         self.reason = ""
+        self.priority = priority
 
     # ------------------------------------------------------------------ wiring
     def _wire(self, master: Master) -> None:
@@ -417,6 +419,7 @@ def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: d
     meta = {**meta, "end_reason": session.reason, "source": "rig", "delay": session.link.delay}
     write_results(session.out_dir, columns, meta, metrics)
     timing = session.timing.summary(session.link.delay, session.period, round_trips)
+    timing["host_scheduling"] = session.priority
     atomic_write(session.out_dir / "timing.json", lambda f: f.write(json.dumps(timing, indent=2).encode()))
     return metrics, timing
 
