@@ -157,5 +157,5 @@ def test_bandwidth_in_the_document_matches_the_frames():
     text = (__import__("pathlib").Path(__file__).parents[1] / "docs" / "protocol.md").read_text()
     assert P.wire_size(P.Sample) == 22 and "**22 B**" in text
     assert P.wire_size(P.Command) == 12 and "**12 B**" in text
-    # 921600 baud 8N1: 92.16 bytes per ms; both directions fit a 1 kHz loop with room.
+    # 1 Mbaud 8N1: 100 bytes per ms; both directions fit a 1 kHz loop with room.
     assert P.wire_size(P.Sample) * 10 / P.DEFAULT_BAUD < 0.3e-3

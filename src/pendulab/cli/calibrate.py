@@ -25,7 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--virtual", action="store_true", help="run against the virtual rig (the plant FMU without the pendulum)")
     parser.add_argument("--port", metavar="PORT", help="run on the rig at this serial port or pyserial URL (COM3, /dev/ttyACM0, socket://HOST:PORT)")
-    parser.add_argument("--baud", type=int, default=921600, metavar="BAUD", help="--port: baud rate (default 921600)")
+    parser.add_argument("--baud", type=int, default=1_000_000, metavar="BAUD", help="--port: baud rate (default 1000000)")
     parser.add_argument("--delay", type=int, metavar="N", help="--port: transport delay in periods (default: measured)")
     parser.add_argument("--iterations", type=_positive_int, default=5, metavar="N", help="iterations, each in both directions (default 5)")
     parser.add_argument(

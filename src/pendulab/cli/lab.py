@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--port", required=True, metavar="PORT", help="the rig's serial port or pyserial URL (COM3, /dev/ttyACM0, socket://HOST:PORT)")
-    parser.add_argument("--baud", type=int, default=921600, metavar="BAUD", help="baud rate (default 921600)")
+    parser.add_argument("--baud", type=int, default=1_000_000, metavar="BAUD", help="baud rate (default 1000000)")
     add_controller_options(parser)
     add_plant_options(parser)
     parser.add_argument("--delay", type=int, metavar="N", help="transport delay in periods (default: measured at connection)")
