@@ -66,7 +66,9 @@ def _join_signed_values(argv: Sequence[str]) -> list[str]:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
-        args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
+        raw = list(sys.argv[1:] if argv is None else argv)
+        args = parser.parse_args(_join_signed_values(raw))
+        args.raw_argv = raw  # for subcommands that hand their options on to another program
         if not getattr(args, "func", None):
             parser.print_help()
             return 2

@@ -96,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
             from pendulab.hil.firmware import run_twin
         except ImportError:
             raise UserError("--firmware needs the firmware twin (pendulab.hil.firmware), which this installation lacks") from None
-        passthrough = [a for a in sys.argv[2:] if not a.startswith("--firmware")]
+        raw = getattr(args, "raw_argv", sys.argv[1:])
+        passthrough = [a for a in raw[raw.index("rig-emulator") + 1:] if not a.startswith("--firmware")]
         return run_twin(Path(args.firmware) if args.firmware else None, passthrough)
     options = emulator_options(args)
     if sys.platform == "win32" and args.tcp is None:
