@@ -20,7 +20,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/select.h>
+#include <poll.h>
+#include <sys/prctl.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -59,11 +60,14 @@ static double kin_v = 0, kin_w = 0, kin_t = 0; /* kinematic test motion */
 static int kinematic = 0, pace = 1;
 static FILE *trace, *profile_out;
 static unsigned seed = 1;
+static int seed_given = 0;
 
 /* the person */
 static double connected_at = -1, zeroed_at = -1, raise_at = -1, released_at = -1;
 static int raising = 0, held = 0, raised_done = 0, hung = 0, faulted = 0;
 
+static double wall(void);
+static double wall0;
 static double now_s(void) { return avr->cycle / F_CPU; }
 
 static void say(const char *fmt, ...) {
@@ -96,18 +100,25 @@ static void rk4(double *s, double V, double t, double h) {
 }
 
 static void kinematic_state(double t, double *s) {
-    /* Cart: a triangle wave of amplitude 0.4 m at kin_v; pendulum: spinning at kin_w; still after kin_t. */
-    double tt = t < kin_t ? t : kin_t, a = 0.4, T = 4 * a / kin_v;
+    /* Cart: a triangle wave of amplitude 0.4 m at kin_v; pendulum: spinning at kin_w; still for the
+     * first 0.3 s (the firmware boots) and after kin_t. */
+    int moving = t >= 0.3 && t < kin_t;
+    double tt = t < 0.3 ? 0 : (t < kin_t ? t : kin_t) - 0.3, a = 0.4, T = 4 * a / kin_v;
     double ph = fmod(tt + T / 4, T) / T; /* starts at 0 going up */
     double tri = ph < 0.5 ? (4 * ph - 1) : (3 - 4 * ph);
     s[0] = a * tri;
-    s[1] = t < kin_t ? (ph < 0.5 ? kin_v : -kin_v) : 0;
+    s[1] = moving ? (ph < 0.5 ? kin_v : -kin_v) : 0;
     s[2] = M_PI + kin_w * tt;
-    s[3] = t < kin_t ? kin_w : 0;
+    s[3] = moving ? kin_w : 0;
 }
 
+static double x_hold;
 static void hand(double t, double *s) {
-    /* The person's hand overrides the pendulum while raising or holding it. */
+    /* The person's hands override the pendulum while raising or holding it, and keep the cart still. */
+    if (raising || held) {
+        s[0] = x_hold;
+        s[1] = 0;
+    }
     if (raising) {
         double f = (t - raise_at) / RAISE_TIME;
         if (f > 1) f = 1;
@@ -212,9 +223,13 @@ static void person(double t);
 static void link_io(void);
 static void pacing(void);
 
+static avr_uart_t *uart0;
+
 static avr_cycle_count_t step_timer(avr_t *a, avr_cycle_count_t when, void *param) {
     (void)a;
     (void)param;
+    /* simavr 1.6 counts a parity bit in every 8N1 byte (11 bits); the wire has 10. */
+    if (uart0 && uart0->cycles_per_byte % 11 == 0) uart0->cycles_per_byte = uart0->cycles_per_byte / 11 * 10;
     advance_to(when);
     person(when / F_CPU);
     seg_end = when + SUB_CYCLES;
@@ -337,6 +352,7 @@ static void uart_out(avr_irq_t *irq, uint32_t value, void *param) {
     (void)param;
     bytes_out++;
     out_buf[out_len++] = corrupt((unsigned char)value);
+    if (value == 0 && trace) fprintf(trace, "tx,%llu,%.6f\n", (unsigned long long)avr->cycle, wall() - wall0);
     if (value == 0 || out_len == sizeof out_buf) flush_out();
 }
 
@@ -358,7 +374,7 @@ static void watch_host(unsigned char b) {
 static void feed_uart(void) {
     while (!xoff && in_pos < in_len) {
         unsigned char b = in_buf[in_pos++];
-        if (trace && b == 0) fprintf(trace, "rx,%llu\n", (unsigned long long)avr->cycle);
+        if (trace && b == 0) fprintf(trace, "rx,%llu,%.6f\n", (unsigned long long)avr->cycle, wall() - wall0);
         avr_raise_irq(uart_in, b);
     }
     if (in_pos == in_len) in_pos = in_len = 0;
@@ -401,7 +417,6 @@ static void link_io(void) {
 }
 
 /* ------------------------------------------------------------------ pacing: AVR time = wall time */
-static double wall0;
 static long lags;
 static double wall(void) {
     struct timespec ts;
@@ -410,19 +425,16 @@ static double wall(void) {
 }
 
 static void pacing(void) {
+    /* Wait for the wall clock, reading the host's bytes as they come; poll() sleeps, it does not spin. */
     double target = wall0 + now_s();
     for (;;) {
         double left = target - wall();
         if (left <= 0) break;
-        if (left > 2e-4) {
-            fd_set r;
-            FD_ZERO(&r);
-            FD_SET(master, &r);
-            struct timeval tv = {0, (long)((left - 1e-4) * 1e6)};
-            if (select(master + 1, &r, NULL, NULL, &tv) > 0) {
-                read_host();
-                feed_uart();
-            }
+        struct pollfd pfd = {master, POLLIN, 0};
+        struct timespec ts = {0, (long)(left * 1e9)};
+        if (ppoll(&pfd, 1, &ts, NULL) > 0) {
+            read_host();
+            feed_uart();
         }
     }
     if (wall() - target > 0.05) { /* fell behind (overload, suspended): do not race to catch up */
@@ -440,6 +452,7 @@ static void person(double t) {
     if (raise_after >= 0 && !raised_done && !raising && since >= raise_after && zeroed_at >= 0 && t >= zeroed_at + 0.1) {
         raising = 1;
         raise_at = t;
+        x_hold = state[0];
         say("a person raises the pendulum (%.1f s) to %.1f deg from upright; held until the motor is enabled", RAISE_TIME,
             HOLD_ANGLE * 180 / M_PI);
     }
@@ -464,9 +477,17 @@ static void person(double t) {
         exit(0);
     }
     if (hang_after >= 0 && t >= hang_after && !hung && dead_loop) {
-        hung = 1;
-        avr->pc = dead_loop; /* the main loop hangs, interrupts stay on */
+        hang_after = -1;
+        hung = 1; /* applied between instructions, in main(): the core rewrites pc after timer callbacks */
         say("firmware hung: main loop stuck in a dead loop (interrupts still on)");
+        if (getenv("TWIN_LOG")) {
+            for (avr_cycle_timer_slot_p t = avr->cycle_timers.timer; t; t = t->next)
+                fprintf(stderr, "timer %p param %p when %llu (now %llu) WDTCSR %02x\n", (void *)t->timer, t->param, (unsigned long long)t->when, (unsigned long long)avr->cycle, avr->data[0x60]);
+        }
+    }
+    if (getenv("TWIN_LOG") && hung && ((long)(t * 1e4)) % 20 == 0) {
+        for (avr_cycle_timer_slot_p tm = avr->cycle_timers.timer; tm; tm = tm->next)
+            fprintf(stderr, "t=%.4f timer %p when %llu (now %llu) pc %x\n", t, (void *)tm->timer, (unsigned long long)tm->when, (unsigned long long)avr->cycle, avr->pc);
     }
     if (duration >= 0 && t >= duration) {
         say("duration reached");
@@ -576,7 +597,7 @@ int main(int argc, char **argv) {
         if (!strcmp(a, "--params")) { NEEDV(); if (parse_list(v, params, PLANT_NP) != PLANT_NP) usage("--params needs the plant's parameter vector"); have_params = 1; }
         else if (!strcmp(a, "--raise-after")) { NEEDV(); raise_after = atof(v); }
         else if (!strcmp(a, "--poke")) { NEEDV(); double p[3]; if (parse_list(v, p, 3) != 3) usage("--poke MAG,DUR,START"); poke_mag = p[0]; poke_dur = p[1]; poke_start = p[2]; }
-        else if (!strcmp(a, "--seed")) { NEEDV(); seed = (unsigned)strtoul(v, NULL, 10) * 2654435761u + 1; }
+        else if (!strcmp(a, "--seed")) { NEEDV(); seed = (unsigned)strtoul(v, NULL, 10) * 2654435761u + 1; seed_given = 1; }
         else if (!strcmp(a, "--restart-after")) { NEEDV(); restart_after = atof(v); }
         else if (!strcmp(a, "--fault-after")) { NEEDV(); fault_after = atof(v); }
         else if (!strcmp(a, "--close-after")) { NEEDV(); close_after = atof(v); }
@@ -592,6 +613,11 @@ int main(int argc, char **argv) {
     }
     if (!firmware) usage("give the firmware (.hex or .elf)");
     if (!have_params) usage("--params is required");
+    if (!seed_given) {
+        struct timespec ts;
+        clock_gettime(CLOCK_REALTIME, &ts);
+        seed = (unsigned)(ts.tv_nsec ^ (ts.tv_sec << 10) ^ ((unsigned)getpid() << 16));
+    }
     if (!seed) seed = 1;
     params[P_poke_magnitude] = 0.0; /* the person pokes, not the model's default poke */
     params[P_q_alpha] = 0.0;        /* quantization happens in the encoders */
@@ -601,7 +627,7 @@ int main(int argc, char **argv) {
     if (!avr) usage("simavr has no atmega2560");
     avr_init(avr);
     avr->frequency = (uint32_t)F_CPU;
-    avr->log = LOG_ERROR;
+    avr->log = getenv("TWIN_LOG") ? LOG_TRACE : LOG_ERROR;
     size_t flen = strlen(firmware);
     if (flen > 4 && !strcmp(firmware + flen - 4, ".elf")) {
         elf_firmware_t f;
@@ -648,6 +674,7 @@ int main(int argc, char **argv) {
     uint32_t flags = 0;
     avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
     uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    uart0 = (avr_uart_t *)avr->io[AVR_DATA_TO_IO(0xC6)].w.param; /* UDR0 */
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_out, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), uart_xon, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), uart_xoff, NULL);
@@ -665,6 +692,7 @@ int main(int argc, char **argv) {
     fflush(stdout);
 
     if (getenv("TWIN_PC_HIST")) pc_hist = calloc(131072, sizeof *pc_hist); /* debugging: instructions per address */
+    prctl(PR_SET_PDEATHSIG, SIGTERM); /* never outlive the program that started us */
     signal(SIGTERM, on_signal);
     signal(SIGINT, on_signal);
     atexit(at_exit);
@@ -691,6 +719,12 @@ int main(int argc, char **argv) {
         if (st == cpu_Done || st == cpu_Crashed) {
             say("the AVR stopped (state %d)", st);
             return 1;
+        }
+        if (hung == 1 && depth == 0) {
+            hung = 2;
+            avr->pc = dead_loop; /* the main loop hangs, interrupts stay on */
+            avr->state = cpu_Running;
+            if (trace) fprintf(trace, "hang,%llu\n", (unsigned long long)avr->cycle);
         }
         if (reset_seen) {
             reset_seen = 0;

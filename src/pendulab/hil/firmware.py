@@ -138,10 +138,17 @@ def run_twin(hex_path: Path | None, argv: list[str]) -> int:
         raise UserError(f"firmware {hex_path} not found; build it with 'make -C firmware' or leave --firmware without a file")
     command = twin_command(Path(hex_path), argv)
     build_twin()
+    import signal
+
     process = subprocess.Popen(command)
+    # A SIGTERM to us (the lab's tests, a process manager) ends the twin too; the twin itself also asks
+    # the kernel for SIGTERM when its parent dies.
+    previous = signal.signal(signal.SIGTERM, lambda *_: process.terminate())
     try:
         return process.wait()
     except KeyboardInterrupt:
         process.terminate()
         process.wait()
         return 0
+    finally:
+        signal.signal(signal.SIGTERM, previous)
