@@ -51,6 +51,8 @@ METRIC_KEYS = (
     "cart_speed_change_m_s",
     "safety_cut_time_s",
     "stable",
+    "limit_cycle_amplitude_rad",
+    "limit_cycle_frequency_rad_s",
 )
 
 #: An angle beyond this (rad) means the pendulum has fallen: the response is not bounded.
@@ -60,6 +62,12 @@ FALLEN_ANGLE = math.pi / 2
 TAIL_FRACTION = 0.10
 #: Settling band relative to the first peak (SPEC §7: 2 %).
 SETTLING_FRACTION = 0.02
+#: A limit cycle: at least this many swings in the analysed tail, none decaying below this fraction of
+#: the tail's largest, and an amplitude of at least two encoder steps (one step is the staircase).
+LIMIT_CYCLE_SWINGS = 4
+LIMIT_CYCLE_STEADINESS = 0.5
+#: Part of the record (from its end) where a limit cycle is looked for.
+LIMIT_CYCLE_TAIL = 0.5
 
 
 @dataclass(frozen=True)
@@ -151,6 +159,9 @@ def compute_metrics(
     # The analysed window: from the poke to the end, or to the cut, or to the first non-finite sample.
     finite = np.isfinite(alpha)
     last = t.size if finite.all() else int(np.argmin(finite))
+    fallen = np.flatnonzero(np.abs(np.where(finite, alpha, 0.0)) >= FALLEN_ANGLE)
+    if fallen.size:  # the response ends where the pendulum falls (read what came before)
+        last = min(last, int(fallen[0]))
     window = (t >= poke_start) & (np.arange(t.size) < last)
     if cut is not None:
         window &= t <= cut
@@ -161,13 +172,13 @@ def compute_metrics(
         return metrics
     tw, aw = t[idx], alpha[idx]
 
-    # Final value: only meaningful if the run went on to its end with the pendulum up; it is
-    # reported once the angle is known to have settled there.
-    final = None
-    if cut is None and bounded:
-        n_tail = max(1, int(round(TAIL_FRACTION * idx.size)))
-        final = float(np.mean(aw[-n_tail:]))
-    reference = final if final is not None else initial
+    # Final value: the mean of the analysed window's tail. It is reported once the angle is known to
+    # have settled there; a run that was cut or fell must have settled before its end for it to count
+    # (the old lab's PIDs settle, then the cart drifts into the track limit).
+    ended_early = cut is not None or not bounded
+    n_tail = max(1, int(round(TAIL_FRACTION * idx.size)))
+    final = float(np.mean(aw[-n_tail:]))
+    reference = final if not ended_early else initial
 
     amplitude = float(np.max(np.abs(aw - initial)))
     tiny = 1e-12 * max(1.0, abs(initial))
@@ -210,11 +221,14 @@ def compute_metrics(
             j = int(np.flatnonzero(outside)[-1])
             t_settle = _band_entry(tw, np.abs(aw - final), band + slack, j)
         hold = TAIL_FRACTION * (tw[-1] - tw[0])
-        if t_settle is not None and tw[-1] - t_settle >= hold:
+        # A record that turns NaN (a blown-up simulation) defines no final value.
+        if t_settle is not None and tw[-1] - t_settle >= hold and finite.all():
             settled = True
             metrics["settling_time_s"] = max(0.0, float(t_settle) - poke_start)
             metrics["final_value_rad"] = final
 
+    if ended_early and settled:
+        reference = final  # the part before the cut defines where the angle went
     # Overshoot and frequency: the swings about the final value, from the one holding the peak on.
     if peak_dev is not None:
         about_final = _lobes(tw, aw - reference, h)
@@ -238,9 +252,48 @@ def compute_metrics(
         n_tail = max(1, int(round(0.25 * idx.size)))
         not_growing = float(np.max(np.abs(aw[-n_tail:] - initial))) <= 2.0 * peak_dev + q
     metrics["stable"] = bool(cut is None and bounded and (settled or not_growing))
-    if metrics["final_value_rad"] is None and cut is None and bounded:
+    if metrics["final_value_rad"] is None and not ended_early:
         metrics["final_value_rad"] = final
+
+    # A sustained oscillation at the end of a run that stayed up: the friction and quantization limit
+    # cycle. Its swings are the response's ending, not an overshoot of the poke's first peak.
+    if not ended_early:
+        cycle = _limit_cycle(tw, aw, q)
+        if cycle is not None:
+            metrics["limit_cycle_amplitude_rad"], metrics["limit_cycle_frequency_rad_s"] = cycle
+            if peak_dev is not None and cycle[0] >= LIMIT_CYCLE_STEADINESS * peak_dev:
+                metrics["overshoot_percent"] = None  # the "overshoot" would be the limit cycle itself
     return metrics
+
+
+def _limit_cycle(t: np.ndarray, alpha: np.ndarray, q: float) -> tuple[float, float] | None:
+    """``(amplitude, frequency)`` of a sustained oscillation at the end of ``alpha``, else None.
+
+    The last :data:`LIMIT_CYCLE_TAIL` of the record is split into swings about its mean (hysteresis
+    of one encoder step); it is a limit cycle when it holds at least :data:`LIMIT_CYCLE_SWINGS` closed
+    swings, none smaller than :data:`LIMIT_CYCLE_STEADINESS` of the largest (not decaying), with an
+    amplitude (mean half peak-to-peak) of at least two encoder steps.
+    """
+    start = int(np.searchsorted(t, t[-1] - LIMIT_CYCLE_TAIL * (t[-1] - t[0])))
+    tt, a = t[start:], alpha[start:]
+    if tt.size < 8:
+        return None
+    dev = a - float(np.mean(a))
+    spread = 0.5 * float(np.ptp(dev))
+    h = max(q, 0.2 * spread, 1e-12)
+    lobes = [lobe for lobe in _lobes(tt, dev, h) if lobe.closed]
+    # Drop the first swing: the tail's start may cut it.
+    lobes = lobes[1:]
+    if len(lobes) < LIMIT_CYCLE_SWINGS:
+        return None
+    peaks = np.array([abs(float(dev[lobe.peak_index])) for lobe in lobes])
+    if peaks.min() < LIMIT_CYCLE_STEADINESS * peaks.max():
+        return None
+    amplitude = float(np.mean(peaks))
+    if amplitude < 2 * q or amplitude <= 0:
+        return None
+    frequency = _damped_frequency(tt, dev, lobes)
+    return (amplitude, frequency) if frequency is not None else None
 
 
 # ---------------------------------------------------------------------------------------- helpers

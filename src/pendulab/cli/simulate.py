@@ -177,8 +177,19 @@ def _print_summary(result: Any, out_dir: Path, written: list[Path], elapsed: flo
     print(f"  controller          {result.meta['controller']}")
     print(f"  natural frequency   {_fmt(m.get('natural_frequency_rad_s'), ' rad/s')}")
     print(f"  peak time           {_fmt(m.get('peak_time_s'), ' s')}")
-    print(f"  overshoot           {_fmt(m.get('overshoot_percent'), ' %')}")
-    print(f"  settling time       {_fmt(m.get('settling_time_s'), ' s')}")
+    amplitude, frequency = m.get("limit_cycle_amplitude_rad"), m.get("limit_cycle_frequency_rad_s")
+    if amplitude is not None and frequency is not None:
+        # A sustained oscillation (stick-slip friction and quantization; the rig does it too): name it
+        # rather than print an overshoot and a settling time that describe it badly.
+        print(
+            f"  limit cycle         ±{math.degrees(amplitude):.2f}° ({amplitude * 1e3:.3g} mrad) at {frequency:.3g} rad/s "
+            "(sustained oscillation from friction and quantization)"
+        )
+        if m.get("overshoot_percent") is not None:
+            print(f"  overshoot           {_fmt(m.get('overshoot_percent'), ' %')}")
+    else:
+        print(f"  overshoot           {_fmt(m.get('overshoot_percent'), ' %')}")
+        print(f"  settling time       {_fmt(m.get('settling_time_s'), ' s')}")
     print(f"  final angle         {_fmt(m.get('final_value_rad'), ' rad')}")
     print(f"  cart speed change   {_fmt(m.get('cart_speed_change_m_s'), ' m/s')}")
     print(f"results in {out_dir}/ ({', '.join(p.name for p in written)}) after {elapsed:.1f} s")
