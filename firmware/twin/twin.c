@@ -51,7 +51,6 @@ static double state[4] = {0, 0, M_PI, 0}; /* at cycle seg_start */
 static double next_state[4];              /* predicted at cycle seg_end */
 static avr_cycle_count_t seg_start, seg_end;
 static double v_dac, v_applied;
-static int amp_enabled;
 
 /* options */
 static double raise_after = -1, poke_mag, poke_dur, poke_start = -1, restart_after = -1, fault_after = -1,
@@ -113,9 +112,10 @@ static void kinematic_state(double t, double *s) {
 }
 
 static double x_hold;
+static int amp_enabled;
 static void hand(double t, double *s) {
     /* The person's hands override the pendulum while raising or holding it, and keep the cart still. */
-    if (raising || held) {
+    if (raising || held) { /* until the raise is done, whatever the motor does */
         s[0] = x_hold;
         s[1] = 0;
     }
@@ -246,25 +246,28 @@ static void restart_steps(void) {
     avr_cycle_timer_register(avr, SUB_CYCLES, step_timer, NULL);
 }
 
+static void release(void) {
+    /* The controller has the pendulum: the hand lets go (and the poke is scheduled from now). */
+    held = 0;
+    released_at = now_s();
+    if (poke_start >= 0) {
+        params[P_poke_magnitude] = poke_mag;
+        params[P_poke_duration] = poke_dur;
+        params[P_poke_start] = released_at + poke_start;
+        say("hand released, the controller has the pendulum; poke %g rad/s^2 for %g s at t = %.3f s", poke_mag, poke_dur,
+            released_at + poke_start);
+    } else {
+        say("hand released, the controller has the pendulum");
+    }
+}
+
 static void set_voltage(void) {
     double v = amp_enabled ? v_dac : 0.0;
     if (v == v_applied) return;
     advance_to(avr->cycle);
     v_applied = v;
     if (trace) fprintf(trace, "volt,%llu,%.0f,%d\n", (unsigned long long)avr->cycle, v * 1000, amp_enabled);
-    if (held && amp_enabled && v != 0.0) {
-        held = 0;
-        released_at = now_s();
-        if (poke_start >= 0) {
-            params[P_poke_magnitude] = poke_mag;
-            params[P_poke_duration] = poke_dur;
-            params[P_poke_start] = released_at + poke_start;
-            say("hand released, the controller has the pendulum; poke %g rad/s^2 for %g s at t = %.3f s", poke_mag, poke_dur,
-                released_at + poke_start);
-        } else {
-            say("hand released, the controller has the pendulum");
-        }
-    }
+    if (held && amp_enabled && v != 0.0) release();
     restart_steps();
 }
 
@@ -437,7 +440,7 @@ static void pacing(void) {
             feed_uart();
         }
     }
-    if (wall() - target > 0.05) { /* fell behind (overload, suspended): do not race to catch up */
+    if (wall() - target > 3e-4) { /* fell behind (descheduled, overload): never race to catch up, which would squeeze the host's time */
         lags++;
         wall0 = wall() - now_s();
     }
@@ -461,6 +464,7 @@ static void person(double t) {
         raised_done = 1;
         held = 1;
         say("pendulum raised and held");
+        if (amp_enabled && v_applied != 0.0) release(); /* the controller engaged during the last of the raise */
     }
     if (since >= 0 && restart_after >= 0 && since >= restart_after) {
         restart_after = -1;

@@ -1,0 +1,98 @@
+"""Must-show 3: 'pendulab lab' runs the demo controller against the real firmware in its simavr twin
+('pendulab rig-emulator --firmware'), balances for more than 10 s with a poke, and agrees with
+'pendulab simulate --delay N' of the same controller and poke."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from firmware_helpers import twin_available
+from hil_helpers import emulator, lab, lab_process, read_log
+
+pytestmark = [
+    pytest.mark.skipif(sys.platform == "win32", reason="simavr and pseudo-terminals are POSIX"),
+    pytest.mark.skipif(not twin_available(), reason="needs gcc-avr, avr-libc, simavr, libsimavr-dev (.ci/run installs them)"),
+]
+
+POKE = "220,0.005,1"
+
+
+@pytest.fixture(scope="module")
+def twin_run(tmp_path_factory):
+    from pendulab.fmu.build import ensure_fmu
+    from pendulab.hil.firmware import build_firmware, build_twin
+
+    for name in ("Plant", "Controller", "Supervisor"):
+        ensure_fmu(name)
+    build_firmware(), build_twin()
+    out = tmp_path_factory.mktemp("fwlab") / "demo"
+    with emulator("--firmware", "--raise-after", "0.3", "--poke", POKE) as emu:
+        proc = lab_process("--port", emu.port, "--demo", "--out", str(out))
+        proc.stdin.write("s\n")  # type: ignore[union-attr]
+        proc.stdin.flush()  # type: ignore[union-attr]
+        emu.wait_for("hand released", timeout=30)
+        time.sleep(11.0)
+        proc.stdin.write("e\n")  # type: ignore[union-attr]
+        proc.stdin.flush()  # type: ignore[union-attr]
+        stdout, stderr = proc.communicate(timeout=30)
+        text = emu.text
+    return out, proc.returncode, stdout, stderr, text
+
+
+def test_demo_controller_balances_through_lab_twin_and_firmware(twin_run):
+    out, status, stdout, stderr, twin_text = twin_run
+    assert status == 0, stderr
+    assert "firmware 1.0.0" in stdout
+    assert "[twin" in twin_text and "motor enabled" in twin_text
+    log = read_log(out / "rig_log.csv")
+    running = log["supervisor_state"] == 2
+    t_run = log["t"][running]
+    assert t_run[-1] - t_run[0] > 10.0
+    assert not (log["supervisor_state"] == 4).any(), "the supervisor tripped"
+    assert np.max(np.abs(log["alpha"][running])) < np.radians(12)
+    assert np.all(np.diff(log["tick"]) == 1)
+    # The poke where the twin put it: 1 s after the hand let go, which the twin reports in AVR time
+    # together with the moment the motor first pushed (the log's first non-zero voltage).
+    import re
+
+    enabled = float(re.search(r"\[twin +([0-9.]+) s\] motor enabled", twin_text).group(1))
+    poke_at = float(re.search(r"poke [0-9.]+ rad/s\^2 for [0-9.]+ s at t = ([0-9.]+) s", twin_text).group(1))
+    first_push = log["t"][np.argmax(log["voltage"] != 0)]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["poke_start_detected_s"] == pytest.approx(first_push + poke_at - enabled, abs=0.02)
+    timing = json.loads((out / "timing.json").read_text())
+    print(f"twin session: N = {timing['delay_periods']}, latency p50 {timing['answer_latency_ms']['p50']:.3f} ms, "
+          f"{timing['late_commands']} late, {timing['crc_errors']} CRC errors")
+
+
+def test_twin_run_matches_simulate_with_the_same_delay(twin_run, tmp_path):
+    from pendulab.cli.main import main
+    from pendulab.hil.compare import load_compared, nrmse
+
+    out = twin_run[0]
+    n = json.loads((out / "timing.json").read_text())["delay_periods"]
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--demo", "--delay", str(n), "--poke", POKE, "--stop-time", "4", "--out", str(sim)]) == 0
+    error = nrmse(load_compared(out), load_compared(sim), "alpha", window=1.0)
+    print(f"angle NRMSE firmware twin vs simulate --delay {n}: {100 * error:.2f} %")
+    assert error < 0.10
+
+
+def test_rig_emulator_firmware_refuses_options_the_twin_lacks():
+    result = lab_like(["--firmware", "--latency", "1"])
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--latency" in lines[0] and "Traceback" not in result.stderr
+
+
+def lab_like(args):
+    import subprocess
+
+    from hil_helpers import ENV, PYTHON
+
+    return subprocess.run([PYTHON, "-m", "pendulab", "rig-emulator", *args], capture_output=True, text=True, timeout=60, env=ENV)
