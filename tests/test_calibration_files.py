@@ -84,12 +84,35 @@ def test_old_lab_mat_file_with_five_numbers(tmp_path):
     assert load_calibration(path).friction == (2.0, 0.004, 3.5, 0.06, 25.0)
 
 
-def test_old_lab_mat_file_with_four_numbers_takes_the_default_B(tmp_path):
+@pytest.mark.parametrize("name", ["defaultData", "measuredData", "fv"])
+def test_old_lab_mat_file_with_four_numbers_reads_as_the_old_lab_did(tmp_path, name):
+    # The old lab's real file: [F1 v1 B unused]; its static-friction function fixed F2 = 4 F1, v2 = 0.1 m/s.
     path = tmp_path / "old.mat"
-    scipy.io.savemat(path, {"fv": np.array([1.2, 0.003, 2.5, 0.04])})
+    scipy.io.savemat(path, {name: np.array([[1.2, 0.01, 0.0, 0.0]])})
     cal = load_calibration(path)
-    assert cal.friction == (1.2, 0.003, 2.5, 0.04, PlantParameters().B)
-    assert "B set to the lab default" in cal.metadata["note"]
+    assert cal.friction == pytest.approx((1.2, 0.01, 4.8, 0.1, 0.0))
+    assert cal.metadata["mat_variable"] == name
+    assert "[F1, v1, B, unused]" in cal.metadata["note"]
+    scipy.io.savemat(path, {name: np.array([2.0, 0.004, 25.0, 7.0])})
+    assert load_calibration(path).friction == pytest.approx((2.0, 0.004, 8.0, 0.1, 25.0))
+
+
+def test_old_lab_mat_file_v73_hdf5(tmp_path):
+    from matfiles import save_mat73
+
+    path = save_mat73(tmp_path / "measured.mat", {"measuredData": np.array([[1.5, 0.005, 20.0, 0.0]])})
+    assert load_calibration(path).friction == pytest.approx((1.5, 0.005, 6.0, 0.1, 20.0))
+
+
+def test_empty_old_lab_mat_file_is_one_clear_error(tmp_path):
+    path = tmp_path / "empty.mat"
+    scipy.io.savemat(path, {"defaultData": np.zeros((0, 0))})
+    with pytest.raises(CalibrationError, match="is empty") as info:
+        load_calibration(path)
+    assert "\n" not in str(info.value)
+    scipy.io.savemat(path, {})
+    with pytest.raises(CalibrationError, match="holds no friction vector"):
+        load_calibration(path)
 
 
 @pytest.mark.parametrize(
@@ -97,6 +120,7 @@ def test_old_lab_mat_file_with_four_numbers_takes_the_default_B(tmp_path):
     [
         ({"x": np.arange(10.0)}, "holds no friction vector"),
         ({"a": np.ones(5), "b": np.ones(4)}, "several 4/5-number vectors"),
+        ({"defaultData": np.array([0.5, 0.2, 3.0, 0.0])}, "v1=0.2 m/s is above v2=0.1"),
         ({"friction": np.array([1.0, 0.1, 2.0, 0.05, 3.0])}, "v1=0.1 m/s is above v2"),
     ],
 )

@@ -16,10 +16,12 @@ The friction vector is the one the model uses as it stands (:meth:`Calibration.a
 the plant parameters unchanged). ``pendulab calibrate`` writes it already scaled for the pendulum's
 weight and keeps the vector measured with the pendulum removed in ``metadata.measured_friction``.
 
-Loading also accepts the old lab's MATLAB ``.mat`` file holding a friction vector: the variable named
-like ``friction``/``fric`` (case-insensitive), else the only numeric vector with 4 or 5 entries. Five
-numbers are ``[F1, v1, F2, v2, B]``. Four numbers are ``[F1, v1, F2, v2]`` (the older stick-slip model
-had no viscous slip term): ``B`` then takes the lab's default (20 kg/s), and the metadata says so.
+Loading also accepts the old lab's MATLAB ``.mat`` file (MAT v5 or v7.3) holding a friction vector:
+the variable named like ``friction``/``fric`` (case-insensitive), else the only numeric vector with 4
+or 5 entries, whatever its name (the lab used ``defaultData`` and ``measuredData``). Four numbers are
+read as the old lab's static-friction function read them, ``[F1, v1, B, unused]`` with
+``F2 = 4 F1`` and ``v2 = 0.1 m/s`` fixed (SPEC §8); five are pendulab's ``[F1, v1, F2, v2, B]``. An
+empty file is one clear error.
 
 Examples
 --------
@@ -205,46 +207,62 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     return Calibration.from_dict(data, source=f"calibration file {path}")
 
 
+#: The old lab's static-friction function fixed these (SPEC §8): ``F2 = OLD_LAB_F2_FACTOR * F1``, ``v2``.
+OLD_LAB_F2_FACTOR = 4.0
+OLD_LAB_V2 = 0.1
+
+
 def _load_mat(path: Path) -> Calibration:
+    """The old lab's ``.mat`` calibration (MAT v5 or v7.3), read as that lab's code read it.
+
+    One numeric variable of any name (the lab used ``defaultData`` and ``measuredData``): four numbers
+    are ``[F1, v1, B, unused]`` with ``F2 = 4 F1`` and ``v2 = 0.1 m/s``; five numbers are pendulab's
+    own ``[F1, v1, F2, v2, B]``. A variable named like ``fric`` wins when there are several.
+    """
     import numpy as np
-    import scipy.io
+
+    from pendulab.calibration.logs import read_mat_variables
 
     source = f"calibration file {path}"
-    try:
-        contents = scipy.io.loadmat(str(path), squeeze_me=True)
-    except NotImplementedError:
-        raise CalibrationError(f"{source} is a MATLAB v7.3 (HDF5) file; save it with save(..., '-v7') and retry") from None
-    except Exception as exc:  # scipy raises several kinds for a corrupt file
-        raise CalibrationError(f"{source} is not a readable MATLAB .mat file: {exc}") from None
-    variables = {k: v for k, v in contents.items() if not k.startswith("__")}
+    variables = read_mat_variables(path, what=source)
+    numeric = {k: v for k, v in variables.items() if v.dtype.kind in "fiub"}
+    if numeric and all(v.size == 0 for v in numeric.values()):
+        raise CalibrationError(
+            f"{source} is empty (variable {', '.join(sorted(numeric))} holds no numbers); "
+            "save the friction vector [F1 v1 B unused] in it, or use a JSON calibration file"
+        )
 
     def as_vector(value: Any) -> np.ndarray | None:
-        try:
-            array = np.asarray(value, dtype=float).ravel()
-        except (TypeError, ValueError):
-            return None
+        array = np.asarray(value, dtype=float).ravel()
         return array if array.size in (4, 5) else None
 
-    named = [k for k in variables if "fric" in k.lower()]
-    candidates = [k for k in named if as_vector(variables[k]) is not None]
+    named = [k for k in numeric if "fric" in k.lower()]
+    candidates = [k for k in named if as_vector(numeric[k]) is not None]
     if not candidates:
-        candidates = [k for k in variables if as_vector(variables[k]) is not None]
+        candidates = [k for k in numeric if as_vector(numeric[k]) is not None]
     if not candidates:
         raise CalibrationError(
-            f"{source} holds no friction vector: expected a variable 'friction' with 4 or 5 numbers [F1 v1 F2 v2 (B)]"
+            f"{source} holds no friction vector: expected one variable with 4 numbers [F1 v1 B unused] "
+            "(the old lab's format) or 5 numbers [F1 v1 F2 v2 B]"
         )
     if len(candidates) > 1:
         raise CalibrationError(
-            f"{source} holds several 4/5-number vectors ({', '.join(sorted(candidates))}); name the friction vector 'friction'"
+            f"{source} holds several 4/5-number vectors ({', '.join(sorted(candidates))}); keep only the friction vector in it"
         )
     name = candidates[0]
-    vector = as_vector(variables[name])
+    vector = as_vector(numeric[name])
     assert vector is not None
     metadata: dict[str, Any] = {"source": str(path), "mat_variable": name, "method": "old lab .mat file"}
-    values = [float(v) for v in vector]
-    if len(values) == 4:
-        values.append(PlantParameters().B)
-        metadata["note"] = "4-number vector read as [F1, v1, F2, v2]; B set to the lab default"
+    if len(vector) == 4:
+        F1, v1, B = (float(v) for v in vector[:3])
+        values = [F1, v1, OLD_LAB_F2_FACTOR * F1, OLD_LAB_V2, B]
+        metadata["note"] = (
+            "4-number vector read as the old lab read it: [F1, v1, B, unused], "
+            f"F2 = {OLD_LAB_F2_FACTOR:g}*F1, v2 = {OLD_LAB_V2:g} m/s"
+        )
+        metadata["old_lab_vector"] = [float(v) for v in vector]
+    else:
+        values = [float(v) for v in vector]
     checked = _validate(dict(zip(FRICTION_NAMES, values)), {}, source)
     return Calibration(friction=tuple(checked[n] for n in FRICTION_NAMES), metadata=metadata)  # type: ignore[arg-type]
 

@@ -5,7 +5,8 @@ A log is read from
 - a CSV file whose header names at least ``t``, ``V`` and ``x`` (seconds, volts, metres; ``alpha`` in
   radians optional; other columns are ignored; lines starting with ``#`` are comments), or
 - the ``run.csv`` / ``run.mat`` that ``pendulab simulate`` writes (columns ``t``, ``x``, ``voltage``,
-  ``alpha_measured``, ...): ``voltage`` is used as ``V``, ``alpha_measured`` (else ``alpha``) as the angle.
+  ``alpha_measured``, ...): ``voltage`` is used as ``V``, ``alpha_measured`` (else ``alpha``) as the angle, or
+- a folder of the old MATLAB lab's logs (one ``.mat`` per signal, see :func:`read_old_lab_folder`).
 
 Sample ``k`` means: ``x[k]`` (and ``alpha[k]``) measured at ``t[k]``, and ``V[k]`` applied from
 ``t[k]`` until ``t[k+1]``.
@@ -139,6 +140,9 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
         Missing file or column, a value that is not a number, NaN, non-increasing time.
     """
     path = Path(path)
+    if path.is_dir():
+        columns = read_old_lab_folder(path)
+        return RampLog(t=columns["t"], V=columns["voltage"], x=columns["x"], alpha=columns["alpha"], source=str(path))
     if not path.is_file():
         raise CalibrationError(f"log {path} does not exist")
     if path.suffix.lower() == ".mat":
@@ -213,25 +217,208 @@ def _is_number(text: str) -> bool:
 
 
 def _read_mat(path: Path) -> dict[str, np.ndarray]:
-    import scipy.io
-
-    try:
-        contents = scipy.io.loadmat(str(path), squeeze_me=True)
-    except NotImplementedError:
-        raise CalibrationError(f"log {path} is a MATLAB v7.3 (HDF5) file; save it with save(..., '-v7') and retry") from None
-    except Exception as exc:
-        raise CalibrationError(f"log {path} is not a readable MATLAB .mat file: {exc}") from None
+    """Column vectors of a ``run.mat`` (or any .mat of column vectors), by variable name."""
+    contents = read_mat_variables(path, what=f"log {path}")
     columns: dict[str, np.ndarray] = {}
-    for name, value in contents.items():
-        if name.startswith("__"):
-            continue
-        try:
-            array = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
+    for name, array in contents.items():
+        if array.dtype.kind not in "fiub":
             continue  # structs (meta), strings
+        array = array.astype(float)
         if array.ndim <= 2 and array.size > 0 and (array.ndim < 2 or 1 in array.shape):
             columns[name] = array.ravel()
     return columns
+
+
+def read_mat_variables(path: str | os.PathLike[str], what: str | None = None) -> dict[str, np.ndarray]:
+    """Numeric and other arrays of a MATLAB ``.mat`` file, MAT v5 (SciPy) or v7.3 (HDF5, h5py).
+
+    v7.3 files store arrays column-major; they are transposed back to MATLAB's shape. Structs and cell
+    arrays come back as object arrays (v5) or are skipped (v7.3).
+
+    Raises
+    ------
+    CalibrationError
+        Unreadable or corrupt file (one line, naming ``what``).
+    """
+    import scipy.io
+
+    path = Path(path)
+    what = what or f"file {path}"
+    try:
+        contents = scipy.io.loadmat(str(path), squeeze_me=False)
+    except NotImplementedError:  # MAT v7.3 is HDF5
+        return _read_mat_hdf5(path, what)
+    except Exception as exc:  # scipy raises several kinds for a corrupt file
+        if _is_hdf5(path):  # v7.3 written without MATLAB's text header
+            return _read_mat_hdf5(path, what)
+        raise CalibrationError(f"{what} is not a readable MATLAB .mat file: {exc}") from None
+    return {k: np.asarray(v) for k, v in contents.items() if not k.startswith("__")}
+
+
+def _is_hdf5(path: Path) -> bool:
+    try:
+        import h5py
+
+        return bool(h5py.is_hdf5(path))
+    except (ImportError, OSError):
+        return False
+
+
+def _read_mat_hdf5(path: Path, what: str) -> dict[str, np.ndarray]:
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is a dependency
+        raise CalibrationError(f"{what} is a MATLAB v7.3 (HDF5) file; install h5py or save it with save(..., '-v7')") from None
+    variables: dict[str, np.ndarray] = {}
+    try:
+        with h5py.File(path, "r") as handle:
+            for name, item in handle.items():
+                if name.startswith("#") or not isinstance(item, h5py.Dataset):
+                    continue  # '#refs#' and struct groups
+                kind = item.attrs.get("MATLAB_class", b"double")
+                kind = kind.decode() if isinstance(kind, bytes) else str(kind)
+                if kind in ("char", "cell", "struct") or item.dtype.kind not in "fiub":
+                    continue
+                if item.attrs.get("MATLAB_empty", 0):
+                    variables[name] = np.zeros((0,), dtype=float)
+                    continue
+                variables[name] = np.asarray(item[()]).T  # column-major on disk
+    except OSError as exc:
+        raise CalibrationError(f"{what} is not a readable MATLAB .mat file: {exc}") from None
+    return variables
+
+
+# ------------------------------------------------------------------------------ old-lab log folders
+#: Words in a file (or variable) name that say which signal an old-lab .mat file holds.
+_OLD_LAB_SIGNALS = {
+    "alpha": ("angle", "alpha", "theta", "pend"),
+    "x": ("position", "pos", "cart", "x"),
+    "voltage": ("voltage", "volt", "vm", "u", "v"),
+}
+
+
+def _signal_of(name: str) -> str | None:
+    """``alpha``, ``x`` or ``voltage`` for a file/variable name, by whole words first, then substrings."""
+    stem = name.lower()
+    words = [w for w in "".join(c if c.isalnum() else " " for c in stem).split()]
+    for signal, keys in _OLD_LAB_SIGNALS.items():
+        if any(w in keys for w in words):
+            return signal
+    for signal, keys in _OLD_LAB_SIGNALS.items():
+        if any(len(k) > 2 and k in stem for k in keys):
+            return signal
+    return None
+
+
+def _two_column(path: Path) -> np.ndarray:
+    """The ``[t, value]`` array of one old-lab .mat file, as ``(n, 2)`` sorted by strictly increasing t."""
+    variables = read_mat_variables(path, what=f"old-lab log file {path}")
+    arrays = [np.asarray(v, dtype=float) for v in variables.values() if v.dtype.kind in "fiub" and v.ndim == 2 and 2 in v.shape and v.size > 4]
+    if len(arrays) != 1:
+        found = ", ".join(f"{k} {tuple(v.shape)}" for k, v in variables.items()) or "no variables"
+        raise CalibrationError(
+            f"old-lab log file {path} must hold one two-column [t, value] array (found: {found})"
+        )
+    data = arrays[0]
+    data = data if data.shape[1] == 2 else data.T
+    data = data[np.all(np.isfinite(data), axis=1)]
+    order = np.argsort(data[:, 0], kind="stable")
+    data = data[order]
+    keep = np.concatenate(([True], np.diff(data[:, 0]) > 0))  # repeated time stamps: keep the first
+    data = data[keep]
+    if len(data) < 2:
+        raise CalibrationError(f"old-lab log file {path} holds fewer than 2 finite samples")
+    return data
+
+
+def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """Read a folder of the old MATLAB lab's logs: one ``.mat`` per signal, each ``[t, value]``.
+
+    The old lab saved the angle, the cart position and the voltage in separate files (MAT v5 or v7.3),
+    each a two-column array at a variable time step. The signal of each file is told by its file name
+    (``angle``/``alpha``/``theta``/``pend``, ``position``/``pos``/``cart``/``x``,
+    ``voltage``/``volt``/``vm``/``u``/``v``), else by its variable's name.
+
+    The columns are put on one uniform time base: the time span all three cover, at the median sample
+    period of the finest signal. Position and angle are interpolated linearly; the voltage is held
+    (zero-order hold, as a DAC holds it), so ``voltage[k]`` is what was applied from ``t[k]`` on.
+
+    Units and conventions (what can be told from the data, and only that):
+
+    * angle: radians; if its largest magnitude exceeds ``2*pi + 0.5`` it is taken as degrees. If its
+      median magnitude is above ``pi/2`` the log was zeroed with the pendulum hanging (the old lab's
+      encoder zero), and ``alpha`` is wrapped to the upright convention ``alpha - pi`` in
+      ``(-pi, pi]``; the sign is kept as logged (it cannot be told from the data).
+    * position: metres; if its largest magnitude exceeds 1.5 m (longer than the track) it is taken as
+      millimetres.
+    * voltage: volts, as logged.
+
+    Parameters
+    ----------
+    path : path-like
+        The folder.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``t`` (s, starting where the signals start), ``alpha`` (rad, upright convention), ``x`` (m),
+        ``voltage`` (V), equally long.
+
+    Raises
+    ------
+    CalibrationError
+        (a :class:`~pendulab.errors.UserError`) Not a folder, no .mat files, a signal missing or given
+        twice, a file that is not one ``[t, value]`` array, signals that do not overlap in time.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise CalibrationError(f"old-lab log folder {folder} does not exist or is not a folder")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".mat" and p.is_file())
+    if not files:
+        raise CalibrationError(
+            f"old-lab log folder {folder} holds no .mat files; expected one .mat per signal (angle, position, voltage)"
+        )
+    found: dict[str, Path] = {}
+    for file in files:
+        signal = _signal_of(file.stem)
+        if signal is None:
+            names = list(read_mat_variables(file, what=f"old-lab log file {file}"))
+            signal = next((s for s in map(_signal_of, names) if s), None)
+        if signal is None:
+            continue  # another file in the folder
+        if signal in found:
+            raise CalibrationError(
+                f"old-lab log folder {folder} has two {signal} files ({found[signal].name}, {file.name}); keep one per signal"
+            )
+        found[signal] = file
+    missing = [s for s in ("alpha", "x", "voltage") if s not in found]
+    if missing:
+        label = {"alpha": "angle", "x": "position", "voltage": "voltage"}
+        raise CalibrationError(
+            f"old-lab log folder {folder} has no {', '.join(label[m] for m in missing)} file "
+            f"(found: {', '.join(p.name for p in files)}); name the files angle.mat, position.mat, voltage.mat"
+        )
+    data = {signal: _two_column(file) for signal, file in found.items()}
+    t0 = max(d[0, 0] for d in data.values())
+    t1 = min(d[-1, 0] for d in data.values())
+    if not t1 > t0:
+        raise CalibrationError(f"old-lab log folder {folder}: the signals do not overlap in time; they must come from one run")
+    period = min(float(np.median(np.diff(d[:, 0]))) for d in data.values())
+    n = int(np.floor((t1 - t0) / period + 1e-9)) + 1
+    if n < 2:
+        raise CalibrationError(f"old-lab log folder {folder}: the signals overlap for less than one sample period")
+    t = t0 + period * np.arange(n)
+    x = np.interp(t, data["x"][:, 0], data["x"][:, 1])
+    alpha = np.interp(t, data["alpha"][:, 0], data["alpha"][:, 1])
+    tv, vv = data["voltage"][:, 0], data["voltage"][:, 1]
+    voltage = vv[np.clip(np.searchsorted(tv, t, side="right") - 1, 0, len(vv) - 1)]
+    if np.max(np.abs(x)) > 1.5:
+        x = x * 1e-3
+    if np.max(np.abs(alpha)) > 2 * np.pi + 0.5:
+        alpha = np.radians(alpha)
+    if np.median(np.abs(alpha)) > np.pi / 2:
+        alpha = np.mod(alpha, 2 * np.pi) - np.pi  # hanging zero -> upright (alpha - pi), in [-pi, pi)
+    return {"t": t, "alpha": alpha, "x": x, "voltage": voltage}
 
 
 def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
