@@ -211,26 +211,73 @@ ISR(TIMER1_COMPA_vect) {
 }
 
 /* ------------------------------------------------------------------ UART0 at 1 Mbaud */
-static volatile uint8_t rx_buf[128], rx_head, rx_tail;
-static volatile uint8_t tx_buf[256], tx_head, tx_tail;
+/* Both rings are 256 bytes on a 256-byte boundary: the index is the low byte of the address and wraps
+ * by itself, so the hand-written ISRs below need no arithmetic (42 and 50 cycles, against 63 and 75). */
+static volatile uint8_t rx_buf[256] __attribute__((aligned(256)));
+static volatile uint8_t tx_buf[256] __attribute__((aligned(256)));
+static volatile uint8_t rx_head, rx_tail, tx_head, tx_tail;
 
-ISR(USART0_RX_vect) {
-    uint8_t b = UDR0, next = (rx_head + 1) & 127;
-    if (next != rx_tail) {
-        rx_buf[rx_head] = b;
-        rx_head = next;
-    }
-    if (b == 0 || next == rx_tail) work = 1; /* a frame is complete (or the buffer full): wake the main loop */
+/* Store the byte; wake the main loop on a frame's delimiter (or when the ring is full). */
+ISR(USART0_RX_vect, ISR_NAKED) {
+    __asm__ __volatile__(
+        "push r30\n\t"
+        "in r30, __SREG__\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "push r24\n\t"
+        "push r25\n\t"
+        "lds r24, %[udr]\n\t"
+        "lds r30, %[head]\n\t"
+        "mov r25, r30\n\t"
+        "inc r25\n\t"
+        "lds r31, %[tail]\n\t"
+        "cp r25, r31\n\t"
+        "breq 1f\n\t"            /* full: drop the byte, wake the main loop */
+        "ldi r31, hi8(%[buf])\n\t"
+        "st Z, r24\n\t"
+        "sts %[head], r25\n\t"
+        "tst r24\n\t"
+        "brne 2f\n"
+        "1: ldi r24, 1\n\t"
+        "sts %[work], r24\n"
+        "2: pop r25\n\t"
+        "pop r24\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "out __SREG__, r30\n\t"
+        "pop r30\n\t"
+        "reti\n\t" ::[udr] "i"(&UDR0),
+        [head] "i"(&rx_head), [tail] "i"(&rx_tail), [buf] "i"(rx_buf), [work] "i"(&work));
 }
 
-ISR(USART0_UDRE_vect) {
-    uint8_t t = tx_tail;
-    if (t == tx_head) {
-        UCSR0B &= ~_BV(UDRIE0);
-        return;
-    }
-    UDR0 = tx_buf[t];
-    tx_tail = t + 1;
+/* Send the next byte, or stop the interrupt when the ring is empty. */
+ISR(USART0_UDRE_vect, ISR_NAKED) {
+    __asm__ __volatile__(
+        "push r30\n\t"
+        "in r30, __SREG__\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "push r24\n\t"
+        "lds r30, %[tail]\n\t"
+        "lds r24, %[head]\n\t"
+        "cp r30, r24\n\t"
+        "breq 1f\n\t"
+        "ldi r31, hi8(%[buf])\n\t"
+        "ld r24, Z+\n\t"
+        "sts %[udr], r24\n\t"
+        "sts %[tail], r30\n\t"
+        "rjmp 2f\n"
+        "1: lds r24, %[ucsrb]\n\t"
+        "andi r24, %[noudrie]\n\t"
+        "sts %[ucsrb], r24\n"
+        "2: pop r24\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "out __SREG__, r30\n\t"
+        "pop r30\n\t"
+        "reti\n\t" ::[udr] "i"(&UDR0),
+        [head] "i"(&tx_head), [tail] "i"(&tx_tail), [buf] "i"(tx_buf), [ucsrb] "i"(&UCSR0B),
+        [noudrie] "n"(0xFF & ~(1 << UDRIE0)));
 }
 
 static uint16_t rig_seq;
@@ -494,7 +541,7 @@ int main(void) {
         uint8_t did = 0;
         while (rx_tail != rx_head) {
             uint8_t b = rx_buf[rx_tail];
-            rx_tail = (rx_tail + 1) & 127;
+            rx_tail = rx_tail + 1;
             did = 1;
             if (b == 0) {
                 if (!overflow && flen) {
@@ -515,17 +562,25 @@ int main(void) {
             did = 1;
         }
         if (!did) {
-            /* Sleep until an ISR says there is work: an encoder edge wakes the CPU for a few cycles only. */
+            /* Sleep until an ISR says there is work: an encoder edge wakes the CPU for a few cycles only.
+             * Written out so that its address range (idle_begin..idle_end) is known: the twin counts the
+             * cycles spent here as idle when it measures the CPU load. */
             set_sleep_mode(SLEEP_MODE_IDLE);
             sleep_enable();
-            for (;;) {
-                cli();
-                if (work) break;
-                sei(); /* the instruction after sei runs first: no wake-up is lost */
-                sleep_cpu();
-            }
-            work = 0;
-            sei();
+            __asm__ __volatile__(".global idle_begin\n\t"
+                                 ".global idle_end\n"
+                                 "idle_begin:\n\t"
+                                 "cli\n\t"
+                                 "lds __tmp_reg__, %[work]\n\t"
+                                 "tst __tmp_reg__\n\t"
+                                 "brne idle_end\n\t"
+                                 "sei\n\t" /* the instruction after sei runs first: no wake-up is lost */
+                                 "sleep\n\t"
+                                 "rjmp idle_begin\n"
+                                 "idle_end:\n\t"
+                                 "sts %[work], __zero_reg__\n\t"
+                                 "sei\n\t" ::[work] "i"(&work)
+                                 : "memory");
             sleep_disable();
         }
     }

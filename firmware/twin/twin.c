@@ -9,7 +9,7 @@
  * twin FIRMWARE --params P1,...,Pn [--raise-after S] [--poke MAG,DUR,START] [--seed N]
  *      [--restart-after S] [--fault-after S] [--close-after S] [--byte-error-rate P]
  *   test and measurement options: [--duration S] [--no-pace] [--trace FILE] [--profile FILE]
- *      [--kinematic V,W,T] [--hang-after S]
+ *      [--kinematic V,W,T] [--hang-after S] [--idle BEGIN,END]
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -22,6 +22,7 @@
 #include <string.h>
 #include <poll.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -511,16 +512,26 @@ static struct {
     avr_cycle_count_t entry;
 } stack_[16];
 static int depth;
+static avr_cycle_count_t idle_begin, idle_end, idle_cycles;
 static avr_cycle_count_t run_cycles, sleep_cycles, max_latency[4];
 static avr_cycle_count_t prof_from;
 static int reset_seen;
 
 static uint16_t sp_now(void) { return avr->data[R_SPL] | (avr->data[R_SPH] << 8); }
 
+static double wall_start;
+static double cpu_seconds(void) {
+    struct rusage u;
+    getrusage(RUSAGE_SELF, &u);
+    return u.ru_utime.tv_sec + u.ru_stime.tv_sec + (u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
+}
+
 static void write_profile(void) {
     if (!profile_out) return;
     avr_cycle_count_t span = avr->cycle - prof_from;
-    fprintf(profile_out, "{\"cycles\": %llu, \"run_cycles\": %llu, \"sleep_cycles\": %llu, \"edges\": %ld, \"ticks\": %ld, \"lags\": %ld, \"bytes_in\": %ld, "
+    fprintf(profile_out, "{\"avr_s\": %.6f, \"wall_s\": %.6f, \"cpu_s\": %.6f, ", now_s(), wall() - wall_start, cpu_seconds());
+    fprintf(profile_out, "\"idle_loop_cycles\": %llu, ", (unsigned long long)idle_cycles);
+    fprintf(profile_out, "\"cycles\": %llu, \"run_cycles\": %llu, \"sleep_cycles\": %llu, \"edges\": %ld, \"ticks\": %ld, \"lags\": %ld, \"bytes_in\": %ld, "
             "\"bytes_out\": %ld, \"encoder_latency_max\": [%llu, %llu, %llu, %llu], \"isr\": {",
             (unsigned long long)span, (unsigned long long)run_cycles, (unsigned long long)sleep_cycles, edges_total, ticks_seen, lags, bytes_in, bytes_out,
             (unsigned long long)max_latency[0], (unsigned long long)max_latency[1], (unsigned long long)max_latency[2],
@@ -538,7 +549,6 @@ static void write_profile(void) {
 }
 
 static unsigned *pc_hist;
-static double wall_start;
 static void at_exit(void) {
     if (pc_hist) {
         FILE *f = fopen(getenv("TWIN_PC_HIST"), "w");
@@ -549,7 +559,8 @@ static void at_exit(void) {
     write_profile();
     if (trace) fclose(trace);
     double w = wall() - wall_start;
-    if (w > 0) say("twin ends: %.3f s of AVR time in %.3f s (%.2fx real time)", now_s(), w, now_s() / w);
+    if (w > 0)
+        say("twin ends: %.3f s of AVR time in %.3f s (%.2fx real time), %.3f s of CPU", now_s(), w, now_s() / w, cpu_seconds());
 }
 
 static void on_signal(int sig) {
@@ -609,6 +620,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--duration")) { NEEDV(); duration = atof(v); }
         else if (!strcmp(a, "--hang-after")) { NEEDV(); hang_after = atof(v); }
         else if (!strcmp(a, "--no-pace")) { pace = 0; }
+        else if (!strcmp(a, "--idle")) { NEEDV(); double r[2]; if (parse_list(v, r, 2) != 2) usage("--idle BEGIN,END (byte addresses)"); idle_begin = (avr_cycle_count_t)r[0]; idle_end = (avr_cycle_count_t)r[1]; }
         else if (!strcmp(a, "--trace")) { NEEDV(); trace = fopen(v, "w"); if (!trace) usage("cannot write the trace file"); }
         else if (!strcmp(a, "--profile")) { NEEDV(); profile_out = fopen(v, "w"); if (!profile_out) usage("cannot write the profile file"); }
         else if (!strcmp(a, "--kinematic")) { NEEDV(); double p[3]; if (parse_list(v, p, 3) != 3) usage("--kinematic V,W,T"); kin_v = p[0]; kin_w = p[1]; kin_t = p[2]; kinematic = 1; }
@@ -719,6 +731,7 @@ int main(int argc, char **argv) {
         if (pc_hist && !(sleeping || avr->state == cpu_Sleeping)) pc_hist[pc_before / 2] += (unsigned)(avr->cycle - c_before);
         /* SLEEP jumps the clock to the next event in the same call that executes it. */
         if (sleeping || avr->state == cpu_Sleeping) sleep_cycles += avr->cycle - c_before;
+        else if (pc_before >= idle_begin && pc_before < idle_end) idle_cycles += avr->cycle - c_before;
         else run_cycles += avr->cycle - c_before;
         if (st == cpu_Done || st == cpu_Crashed) {
             say("the AVR stopped (state %d)", st);

@@ -60,6 +60,17 @@ def build_twin() -> Path:
     return TWIN
 
 
+def idle_loop_range(elf: Path | None = None) -> tuple[int, int]:
+    """Byte addresses ``[begin, end)`` of the firmware's idle loop (symbols ``idle_begin``/``idle_end``).
+
+    The twin counts cycles spent there as idle (``--idle BEGIN,END``) when it measures the CPU load.
+    """
+    elf = elf or DEFAULT_HEX.with_suffix(".elf")
+    out = subprocess.run(["avr-nm", str(elf)], capture_output=True, text=True, check=True).stdout
+    symbols = {parts[2]: int(parts[0], 16) for parts in (line.split() for line in out.splitlines()) if len(parts) == 3}
+    return symbols["idle_begin"], symbols["idle_end"]
+
+
 def twin_parser() -> argparse.ArgumentParser:
     """The options the twin takes from ``pendulab rig-emulator``: the plant and the person."""
     from pendulab.cli.options import add_plant_options
