@@ -96,3 +96,31 @@ def lab_like(args):
     from hil_helpers import ENV, PYTHON
 
     return subprocess.run([PYTHON, "-m", "pendulab", "rig-emulator", *args], capture_output=True, text=True, timeout=60, env=ENV)
+
+
+def test_rig_emulator_firmware_with_a_missing_hex_is_one_clear_line(tmp_path):
+    result = lab_like(["--firmware", str(tmp_path / "nope.hex")])
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "nope.hex" in lines[0] and "not found" in lines[0]
+
+
+def test_twin_command_carries_the_plant_options_as_the_parameter_vector(tmp_path):
+    from pathlib import Path
+
+    from pendulab.errors import UserError
+    from pendulab.hil.firmware import twin_command
+    from pendulab.model.parameters import PlantParameters
+
+    hex_path = Path("fw.hex")
+    command = twin_command(hex_path, ["--pendulum", "short", "--friction", "2,0.004,3.5,0.04,25", "--raise-after", "2",
+                                      "--poke", "220,0.005,1", str(hex_path)])
+    values = [float(v) for v in command[command.index("--params") + 1].split(",")]
+    expected = PlantParameters.preset("short").with_values(F1=2, v1=0.004, F2=3.5, v2=0.04, B=25)
+    assert values == expected.as_vector()
+    assert command[command.index("--raise-after") + 1] == "2.0"
+    assert [float(v) for v in command[command.index("--poke") + 1].split(",")] == [220, 0.005, 1]
+    assert command.count(str(hex_path)) == 1  # '--firmware HEX' leaves the path in argv: not an option
+    for bad in (["--friction", "1,2"], ["--pendulum", "huge"], ["--raise-after", "-1"], ["--jitter", "1"], ["--what"]):
+        with pytest.raises(UserError):
+            twin_command(hex_path, bad)

@@ -12,8 +12,8 @@
 #define PEND_A       PD2 /* INT2 [19] */
 #define PEND_B       PD3 /* INT3 [18] */
 
-/* MCP4921 12-bit DAC on the hardware SPI (mode 0, 8 MHz), 4.096 V reference; an op-amp stage makes
- * V_amp = (V_dac - 2.048 V) * 10 / 2.048, so code 2048 is 0 V and one code is 4.88 mV. */
+/* MCP4921 12-bit DAC on the hardware SPI (mode 0, 8 MHz), 4.096 V reference; an inverting op-amp stage
+ * makes V_amp = -(V_dac - 2.048 V) * 10 / 2.048, so code 2048 is 0 V and one code is 4.88 mV. */
 #define DAC_CS       PB0 /* SS   [53] */
 #define DAC_SCK      PB1 /* SCK  [52] */
 #define DAC_SDI      PB2 /* MOSI [51] */

@@ -115,8 +115,9 @@ ENC_ISR(INT3_vect, pend_count, 2, "brtc")
 
 /* ------------------------------------------------------------------ amplifier */
 static void amplifier(int16_t mv, uint8_t on) {
-    /* code = 2048 + mv * 2048 / 10000 (13422 / 65536 = 0.20480), clamped to the DAC's 12 bits. */
-    int16_t code = 2048 + (int16_t)(((int32_t)mv * 13422 + 32768) >> 16);
+    /* The op-amp stage inverts: V_amp = -(V_dac - 2.048 V) * 10 / 2.048, so
+     * code = 2048 - mv * 2048 / 10000 (13422 / 65536 = 0.20480), clamped to the DAC's 12 bits. */
+    int16_t code = 2048 - (int16_t)(((int32_t)mv * 13422 + 32768) >> 16);
     if (!on) code = 2048;
     if (code < 0) code = 0;
     if (code > 4095) code = 4095;

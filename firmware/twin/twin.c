@@ -301,7 +301,7 @@ static void dac_cs(avr_irq_t *irq, uint32_t value, void *param) {
     if (value) { /* CS rising: the MCP4921 latches the last 16 bits */
         uint16_t code = dac_shift & 0x0FFF;
         if (!(dac_shift & 0x1000)) code = 2048; /* shut down: output pulled to 0 V by the stage */
-        v_dac = (code - 2048.0) * 10.0 / 2048.0;
+        v_dac = (2048.0 - code) * 10.0 / 2048.0; /* the inverting op-amp stage of firmware/README.md */
         set_voltage();
     }
 }
