@@ -262,6 +262,53 @@ def _track(roots: Sequence[np.ndarray]) -> np.ndarray:
     return loci
 
 
+@dataclass(frozen=True)
+class RootLocus:
+    """What a root-locus plot shows: branches, open-loop poles and zeros, the closed-loop poles at gain 1, a view.
+
+    ``loci[:, j]`` is branch ``j`` over the gains; ``view`` is ``(re_lo, re_hi, half)``: the real-axis
+    range and the half-height of the imaginary range that frame every marked point.
+    """
+
+    gains: np.ndarray
+    loci: np.ndarray
+    poles: np.ndarray
+    zeros: np.ndarray
+    closed: np.ndarray
+    view: tuple[float, float, float]
+
+    @property
+    def stable(self) -> bool:
+        return bool(np.all(self.closed.real < 0))
+
+
+def root_locus(loop_tf: Any) -> RootLocus:
+    """Root locus of an open loop ``L(s)`` under negative feedback ``1 + k L(s) = 0`` (see :func:`plot_root_locus`)."""
+    num, den = _siso_polynomials(loop_tf)
+    poles, zeros = np.roots(den), np.roots(num) if num.size > 1 else np.array([], dtype=complex)
+    closed = np.roots(den + np.concatenate((np.zeros(den.size - num.size), num)))
+
+    # Gains from "poles barely moved" to "poles near the zeros or far out": scaled by the gain at
+    # which |k num| matches |den| at the loop's typical frequency.
+    magnitudes = np.abs(np.concatenate((poles, zeros)))
+    magnitudes = magnitudes[magnitudes > 1e-9]
+    omega = float(np.exp(np.mean(np.log(magnitudes)))) if magnitudes.size else 1.0
+    k0 = abs(np.polyval(den, 1j * omega)) / max(abs(np.polyval(num, 1j * omega)), 1e-300)
+    lo, hi = np.log10(min(k0, 1.0)) - 4, np.log10(max(k0, 1.0)) + 4
+    gains = np.unique(np.concatenate(([0.0], np.logspace(lo, hi, 600), [1.0])))
+
+    # View: every marked point with a margin; the branches that run off to infinity are clipped.
+    points = np.concatenate((poles, zeros, closed))
+    re_lo, re_hi = min(points.real.min(), 0.0), max(points.real.max(), 0.0)
+    width = max(re_hi - re_lo, 1e-6)
+    re_lo, re_hi = re_lo - 0.12 * width, re_hi + 0.12 * width
+    half = max(1.25 * np.abs(points.imag).max(), 0.4 * (re_hi - re_lo))
+    view = max(re_hi - re_lo, 2 * half)
+    radius = 1.5 * max(abs(re_lo), abs(re_hi), half)
+    gains, loci = root_locus_branches(num, den, gains, max_step=0.004 * view, radius=radius)
+    return RootLocus(gains, loci, poles, zeros, closed, (float(re_lo), float(re_hi), float(half)))
+
+
 def plot_root_locus(loop_tf: Any, path: str | os.PathLike[str], *, title: str = "") -> Path:
     """PNG of the root locus of an open loop ``L(s)`` under negative feedback ``1 + k L(s) = 0``.
 
@@ -284,28 +331,9 @@ def plot_root_locus(loop_tf: Any, path: str | os.PathLike[str], *, title: str = 
     >>> plot_root_locus(L, os.path.join(tempfile.mkdtemp(), "rl.png")).name
     'rl.png'
     """
-    num, den = _siso_polynomials(loop_tf)
-    poles, zeros = np.roots(den), np.roots(num) if num.size > 1 else np.array([], dtype=complex)
-    closed = np.roots(den + np.concatenate((np.zeros(den.size - num.size), num)))
-
-    # Gains from "poles barely moved" to "poles near the zeros or far out": scaled by the gain at
-    # which |k num| matches |den| at the loop's typical frequency.
-    magnitudes = np.abs(np.concatenate((poles, zeros)))
-    magnitudes = magnitudes[magnitudes > 1e-9]
-    omega = float(np.exp(np.mean(np.log(magnitudes)))) if magnitudes.size else 1.0
-    k0 = abs(np.polyval(den, 1j * omega)) / max(abs(np.polyval(num, 1j * omega)), 1e-300)
-    lo, hi = np.log10(min(k0, 1.0)) - 4, np.log10(max(k0, 1.0)) + 4
-    gains = np.unique(np.concatenate(([0.0], np.logspace(lo, hi, 600), [1.0])))
-
-    # View: every marked point with a margin; the branches that run off to infinity are clipped.
-    points = np.concatenate((poles, zeros, closed))
-    re_lo, re_hi = min(points.real.min(), 0.0), max(points.real.max(), 0.0)
-    width = max(re_hi - re_lo, 1e-6)
-    re_lo, re_hi = re_lo - 0.12 * width, re_hi + 0.12 * width
-    half = max(1.25 * np.abs(points.imag).max(), 0.4 * (re_hi - re_lo))
-    view = max(re_hi - re_lo, 2 * half)
-    radius = 1.5 * max(abs(re_lo), abs(re_hi), half)
-    _, loci = root_locus_branches(num, den, gains, max_step=0.004 * view, radius=radius)
+    rl = root_locus(loop_tf)
+    loci, poles, zeros, closed = rl.loci, rl.poles, rl.zeros, rl.closed
+    re_lo, re_hi, half = rl.view
 
     fig = _figure((7.0, 5.6))
     ax = fig.subplots()
