@@ -66,20 +66,25 @@ def parse_poke(text: str) -> tuple[float, float, float]:
     return magnitude, duration, start
 
 
-def run(args: argparse.Namespace) -> int:
-    started = time.perf_counter()
-    if not (args.stop_time > 0 and math.isfinite(args.stop_time)):
-        raise UserError(f"--stop-time {args.stop_time} must be a positive number of seconds")
-    if not (0 < args.step <= 0.1):
-        raise UserError(f"--step {args.step} must be within (0, 0.1] s; the lab runs at 0.001")
-    if args.stop_time / args.step > MAX_STEPS:
+def check_run_settings(stop_time: float, step: float, delay: int) -> None:
+    """Refuse a stop time, control period or transport delay the simulation cannot take (UserError)."""
+    if not (stop_time > 0 and math.isfinite(stop_time)):
+        raise UserError(f"--stop-time {stop_time} must be a positive number of seconds")
+    if not (0 < step <= 0.1):
+        raise UserError(f"--step {step} must be within (0, 0.1] s; the lab runs at 0.001")
+    if stop_time / step > MAX_STEPS:
         # The log is held in memory (9 signals per step): refuse before allocating it.
         raise UserError(
-            f"--stop-time {args.stop_time:g} s at --step {args.step:g} s is {args.stop_time / args.step:.3g} steps; "
+            f"--stop-time {stop_time:g} s at --step {step:g} s is {stop_time / step:.3g} steps; "
             f"a run has at most {MAX_STEPS:,}: shorten the run or lengthen the step"
         )
-    if not 0 <= args.delay <= MAX_DELAY:
-        raise UserError(f"--delay {args.delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
+    if not 0 <= delay <= MAX_DELAY:
+        raise UserError(f"--delay {delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
+
+
+def run(args: argparse.Namespace) -> int:
+    started = time.perf_counter()
+    check_run_settings(args.stop_time, args.step, args.delay)
     poke = parse_poke(args.poke) if args.poke else None
     controller = controller_from_args(args)
     if controller is None:
