@@ -2,8 +2,10 @@
 
 ``run.mat`` is a MATLAB 5 file (readable by every MATLAB version since 5 and by Octave): each column
 a column vector of doubles, plus a ``meta`` struct with ``controller``, ``parameters``,
-``calibration``, ``pendulum`` and ``version``. ``run.csv`` has a header line and the same columns at
-full (round-trip) precision. Every file is written to a temporary file in the same folder first and
+``calibration``, ``pendulum`` and ``version``. ``run.csv`` has a header line and the same columns with
+15 significant digits (relative error below 1e-14; short decimals such as ``0.001`` or ``2`` read back
+exactly), formatted as whole arrays so that a long run's CSV costs little; ``run.mat`` holds the exact
+doubles. Every file is written to a temporary file in the same folder first and
 moved into place with :func:`os.replace`, so a crash never leaves a half-written file behind.
 
 Examples
@@ -93,6 +95,13 @@ def write_results(
     except OSError as exc:
         raise UserError(f"cannot create output folder {out}: {exc.strerror or exc}; choose another --out") from None
 
+    # The CSV text is formatted in a thread while run.mat and metrics.json are written and synced
+    # (numpy and fsync release the GIL).
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(max_workers=1)
+    csv_text = pool.submit(_csv_bytes, names, data)
+    pool.shutdown(wait=False)
     mat_meta = _matlab_meta(meta)
     writers = {
         "mat": lambda f: scipy.io.savemat(
@@ -101,8 +110,8 @@ def write_results(
             format="5",
             oned_as="column",
         ),
-        "csv": lambda f: f.write(_csv_text(names, data).encode()),
         "metrics": lambda f: f.write((json.dumps(_json_safe(metrics), indent=2, allow_nan=False) + "\n").encode()),
+        "csv": lambda f: f.write(csv_text.result()),
     }
     # Write every file to a temporary name first, then move them all into place: a failure half
     # way leaves the previous run's files (or none), never a mixture or a truncated file.
@@ -189,11 +198,95 @@ def _column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
     return names, np.column_stack(arrays) if arrays[0].size else np.zeros((0, len(names)))
 
 
-def _csv_text(names: Sequence[str], data: np.ndarray) -> str:
-    # repr of a Python float is the shortest text that reads back to the same double.
-    lines = [",".join(names)]
-    lines.extend(",".join(map(repr, row)) for row in data.tolist())
-    return "\n".join(lines) + "\n"
+#: Significant digits in run.csv: the decimal mantissa stays below 2**53, so numpy's int64 holds it
+#: exactly and every step of the formatting is a whole-array operation (run.mat keeps the exact values).
+CSV_DIGITS = 15
+_CSV_FIELD = 22  # sign, d0, '.', d1..d14, 'e', exponent sign, three exponent digits
+_PAD = 0  # marks an unused byte of a field; dropped when the rows are joined
+_DIGIT_GROUPS = np.array([[ord(c) for c in f"{i:05d}"] for i in range(100000)], dtype=np.uint8).T.copy()
+
+
+def _format_numbers(values: np.ndarray) -> np.ndarray:
+    """``values`` as text, vectorized: a ``(_CSV_FIELD, n)`` uint8 array, unused bytes ``_PAD``.
+
+    Each number is written with at most :data:`CSV_DIGITS` significant digits (correctly rounded
+    from the double up to one unit in the last digit), trailing zeros dropped: integers below 1e15
+    as integers (``2``, ``-120``), numbers in [1, 10) without an exponent (``1.5``), others as
+    ``d.ddde-5``. NaN, infinities and exponents beyond +-280 fall back to Python's ``repr``.
+    """
+    n = values.size
+    a = np.abs(values)
+    zero = a == 0
+    normal = np.isfinite(values) & (zero | ((a > 1e-280) & (a < 1e280)))
+    safe = np.where(normal & ~zero, a, 1.0)
+    e = np.floor(np.log10(safe)).astype(np.int64)
+    mant = np.rint(safe * np.power(10.0, (CSV_DIGITS - 1 - e).astype(float))).astype(np.int64)
+    bad = (mant >= 10**CSV_DIGITS) | (mant < 10 ** (CSV_DIGITS - 1))
+    if bad.any():  # log10 is one off next to a power of ten
+        eb = np.floor(np.log10(safe[bad]) + 1e-12).astype(np.int64)
+        mb = np.rint(safe[bad] * np.power(10.0, (CSV_DIGITS - 1 - eb).astype(float))).astype(np.int64)
+        over = mb >= 10**CSV_DIGITS
+        e[bad], mant[bad] = eb + over, np.where(over, mb // 10, mb)
+    mant[zero] = 0
+    e[zero] = 0
+    # Digits by table look-up of five-digit groups (integer division is the slow part).
+    high, low = np.divmod(mant, 100000)
+    top, middle = np.divmod(high, 100000)
+    digits = np.empty((CSV_DIGITS, n), dtype=np.uint8)
+    digits[0:5] = _DIGIT_GROUPS[:, top]
+    digits[5:10] = _DIGIT_GROUPS[:, middle]
+    digits[10:15] = _DIGIT_GROUPS[:, low]
+    out = np.empty((_CSV_FIELD, n), dtype=np.uint8)
+    out[0] = np.where(values < 0, ord("-"), _PAD)
+    out[1] = digits[0]
+    out[3:17] = digits[1:]
+    run = np.ones(n, dtype=bool)
+    trailing = np.zeros(n, dtype=np.int8)
+    for k in range(CSV_DIGITS - 1, 0, -1):
+        run &= digits[k] == ord("0")
+        trailing += run
+    nd = (CSV_DIGITS - trailing).astype(np.int8)  # significant digits, at least one
+    e8 = np.clip(e, -100, 100).astype(np.int8)
+    integer = (e8 >= 1) & (e8 < CSV_DIGITS) & (nd <= e8 + 1)
+    shown = np.where(integer, e8 + 1, nd)
+    for k in range(1, CSV_DIGITS):
+        out[2 + k] *= shown > k
+    out[2] = np.where(integer | (nd == 1), _PAD, ord("."))
+    plain = integer | (e8 == 0)
+    ae = np.abs(e)
+    out[17] = np.where(plain, _PAD, ord("e"))
+    out[18] = np.where(plain | (e >= 0), _PAD, ord("-"))
+    out[19:22] = _DIGIT_GROUPS[2:, np.minimum(ae, 999)]
+    out[19] *= ~plain & (ae >= 100)
+    out[20] *= ~plain & (ae >= 10)
+    out[21] *= ~plain
+    for i in np.flatnonzero(~normal):
+        text = np.frombuffer(repr(float(values[i])).encode(), dtype=np.uint8)
+        out[:, i] = _PAD
+        out[: text.size, i] = text
+    return out
+
+
+#: Rows formatted per block: the block's intermediate arrays stay in the processor's cache, which
+#: makes the writer about twice as fast as one pass over a long run.
+_CSV_BLOCK_ROWS = 2048
+
+
+def _csv_bytes(names: Sequence[str], data: np.ndarray) -> bytes:
+    """The CSV text of a table (header, then one line per row), formatted as whole arrays."""
+    header = (",".join(names) + "\n").encode()
+    blocks = (_csv_rows(data[i : i + _CSV_BLOCK_ROWS]) for i in range(0, data.shape[0], _CSV_BLOCK_ROWS))
+    return header + b"".join(blocks)
+
+
+def _csv_rows(data: np.ndarray) -> bytes:
+    n, m = data.shape
+    table = np.empty((n, m, _CSV_FIELD + 1), dtype=np.uint8)
+    table[:, :, :_CSV_FIELD] = _format_numbers(np.ascontiguousarray(data.T).ravel()).reshape(_CSV_FIELD, m, n).transpose(2, 1, 0)
+    table[:, :, _CSV_FIELD] = ord(",")
+    table[:, m - 1, _CSV_FIELD] = ord("\n")
+    flat = table.reshape(-1)
+    return flat[flat != _PAD].tobytes()
 
 
 def _matlab_meta(meta: Mapping[str, Any]) -> dict[str, Any]:

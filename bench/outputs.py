@@ -1,0 +1,104 @@
+#!/usr/bin/env python3
+"""A 100 s run from its start to its written files (``run.mat``, ``run.csv``, ``metrics.json``).
+
+Bar (issue 8): >= 300x real time, end to end.
+
+In one process, repeated (``--repeats``, default 5) in turns, medians compared:
+
+* **run + files**: :func:`pendulab.cosim.pendulum.simulate_poke` of the demo controller for 100 s of
+  simulated time (loading the FMUs, the loop at 1 kHz, the metrics) followed by
+  :func:`pendulab.analysis.results.write_results` into a fresh folder; the ratio is simulated time /
+  wall time;
+* its parts: the simulation, and each file's writer alone (``run.mat``; ``run.csv`` by the vectorized
+  writer; ``run.csv`` by the previous per-row writer, ``",".join(map(repr, row))``, kept here as the
+  baseline).
+
+Also the whole command as a user types it (``pendulab simulate --demo --stop-time 100 --out DIR``,
+a fresh process, interpreter start and imports included), for reference.
+
+Usage::
+
+    python bench/outputs.py [--repeats 5] [--stop-time 100]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+
+BAR_RATIO = 300.0
+
+
+def per_row_csv(names: list[str], data: np.ndarray) -> bytes:
+    """The previous run.csv writer: one repr per number, one join per row (the baseline)."""
+    lines = [",".join(names)]
+    lines.extend(",".join(map(repr, row)) for row in data.tolist())
+    return ("\n".join(lines) + "\n").encode()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--stop-time", type=float, default=100.0)
+    args = parser.parse_args(argv)
+
+    from pendulab.analysis.results import _column_table, _csv_bytes, write_results
+    from pendulab.control.controller import demo_controller
+    from pendulab.cosim.pendulum import simulate_poke
+
+    controller = demo_controller("long")
+    simulate_poke(controller, stop_time=2.0)  # build/unpack the FMUs once, outside the timing
+    times: dict[str, list[float]] = {k: [] for k in ("end to end", "simulation", "run.mat", "run.csv", "run.csv per row", "write_results")}
+    with tempfile.TemporaryDirectory(prefix="pendulab-bench-") as tmp:
+        for i in range(args.repeats):
+            t0 = time.perf_counter()
+            result = simulate_poke(controller, stop_time=args.stop_time)
+            t1 = time.perf_counter()
+            write_results(Path(tmp, f"run{i}"), result.columns, result.meta, result.metrics)
+            t2 = time.perf_counter()
+            times["end to end"].append(t2 - t0)
+            times["simulation"].append(t1 - t0)
+            times["write_results"].append(t2 - t1)
+            names, data = _column_table(result.columns)
+            t3 = time.perf_counter()
+            scipy.io.savemat(Path(tmp, "x.mat"), {n: data[:, [j]] for j, n in enumerate(names)}, format="5", oned_as="column")
+            t4 = time.perf_counter()
+            fast = _csv_bytes(names, data)
+            t5 = time.perf_counter()
+            slow = per_row_csv(names, data)
+            t6 = time.perf_counter()
+            times["run.mat"].append(t4 - t3)
+            times["run.csv"].append(t5 - t4)
+            times["run.csv per row"].append(t6 - t5)
+        rows = data.shape[0]
+        check = np.loadtxt(Path(tmp, "run0", "run.csv"), delimiter=",", skiprows=1)
+        worst = float(np.max(np.abs(check - data) / np.maximum(np.abs(data), 1e-300)))
+
+        t0 = time.perf_counter()
+        command = [sys.executable, "-m", "pendulab", "simulate", "--demo", "--stop-time", f"{args.stop_time:g}", "--out", str(Path(tmp, "cli"))]
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+        cli = time.perf_counter() - t0
+
+    median = {k: statistics.median(v) for k, v in times.items()}
+    print(f"{args.stop_time:g} s of the demo loop at 1 kHz ({rows} rows x {len(names)} columns), median of {args.repeats}:")
+    for key in ("simulation", "write_results", "run.mat", "run.csv", "run.csv per row"):
+        print(f"  {key:<18} {median[key] * 1e3:8.1f} ms")
+    print(f"  run.csv: vectorized writer {median['run.csv per row'] / median['run.csv']:.1f}x faster than the per-row writer; "
+          f"largest relative difference read back {worst:.1e}")
+    ratio = args.stop_time / median["end to end"]
+    print(f"  end to end (run + files) {median['end to end'] * 1e3:.0f} ms = {ratio:.0f}x real time "
+          f"(bar >= {BAR_RATIO:.0f}x: {'met' if ratio >= BAR_RATIO else 'NOT met'})")
+    print(f"  the whole command in a fresh process (interpreter, imports): {cli:.2f} s = {args.stop_time / cli:.0f}x real time")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
