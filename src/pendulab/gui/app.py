@@ -1,0 +1,247 @@
+"""What the GUI's page asks the server, answered with pendulab's own API (no logic of its own).
+
+Every function takes the page's form as plain JSON data and returns plain JSON data; a mistake in
+the form raises :class:`~pendulab.errors.UserError` with the same message as the command line gives,
+because the form is turned into the command line's options and read by the same functions
+(:func:`pendulab.cli.options.controller_from_args`, :func:`~pendulab.cli.simulate.parse_poke`,
+:func:`~pendulab.cli.simulate.check_run_settings`, :func:`~pendulab.cli.options.plant_parameters_from_args`).
+
+Heavy imports (numpy, python-control, CasADi) happen inside the functions: the server starts and draws
+the first page before any of them is needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from pendulab.errors import UserError
+
+#: Most compensators besides the kernel (the lab's G2..G6).
+MAX_COMPENSATORS = 5
+#: Most samples of one signal sent to the page (a long run is thinned for drawing; files keep all).
+MAX_POINTS = 20_000
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything a simulation needs, checked: what :func:`pendulab.cosim.pendulum.simulate_poke` takes."""
+
+    controller: Any
+    params: Any
+    stop_time: float
+    step: float
+    method: str
+    delay: int
+    meta: dict[str, Any]
+
+
+def _text(form: Mapping[str, Any], key: str) -> str:
+    value = form.get(key, "")
+    return "" if value is None else str(value)
+
+
+def _number(value: Any, what: str) -> float:
+    try:
+        number = float(str(value).strip())
+    except ValueError:
+        raise UserError(f"{what} {str(value)!r} is not a number; type a number such as 5 or 0.001") from None
+    if not math.isfinite(number):
+        raise UserError(f"{what} {value!r} must be a finite number")
+    return number
+
+
+def _controller_args(form: Mapping[str, Any]) -> argparse.Namespace:
+    """The command line's controller options that the form describes."""
+    args = argparse.Namespace(zeros=None, poles=None, gain=None, compensator=[], pid=None, controller=None, demo=False)
+    if form.get("mode") == "pid":
+        pid = form.get("pid") or {}
+        args.pid = ",".join(_text(pid, k).strip() for k in ("kp", "ki", "kd"))
+        return args
+    args.zeros, args.poles = _text(form, "zeros"), _text(form, "poles")
+    args.gain = _text(form, "gain").strip() or None
+    rows = [row for row in (form.get("compensators") or []) if any(_text(row, k).strip() for k in ("zeros", "poles", "gain"))]
+    # As typed on the command line: --compensator "ZEROS;POLES;GAIN", read by the same parser.
+    args.compensator = [f"{_text(row, 'zeros')};{_text(row, 'poles')};{_text(row, 'gain')}" for row in rows]
+    return args
+
+
+def parse_controller_form(form: Mapping[str, Any]) -> Any:
+    """The controller of the form: kernel plus compensators, or PID; the command line's rules and messages."""
+    from pendulab.cli.options import controller_from_args
+
+    controller = controller_from_args(_controller_args(form))
+    if controller is None:
+        raise UserError("no controller given: type the kernel's zeros, poles and gain, or choose PID")
+    return controller
+
+
+def check_controller(form: Mapping[str, Any]) -> dict[str, Any]:
+    """``{"ok": True, "describe": G(s) formatted, "factors": [...]}`` or ``{"ok": False, "error": message}``."""
+    try:
+        controller = parse_controller_form(form)
+    except UserError as exc:
+        return {"ok": False, "error": str(exc)}
+    labels = ["kernel"] + [f"compensator {i}" for i in range(1, len(controller.factors))]
+    factors = [{"label": label, "text": f.describe()} for label, f in zip(labels, controller.factors)]
+    return {"ok": True, "describe": str(controller), "factors": factors, "order": controller.order}
+
+
+def plant_parameters(form: Mapping[str, Any], calibration_path: str | None) -> Any:
+    """Plant parameters of the chosen pendulum and cart with the chosen calibration applied."""
+    from pendulab.cli.options import plant_parameters_from_args
+
+    args = argparse.Namespace(pendulum=_text(form, "pendulum") or "long", cart=_text(form, "cart") or "ip02", calibration=calibration_path)
+    return plant_parameters_from_args(args)
+
+
+def run_settings(form: Mapping[str, Any], calibration_path: str | None, calibration_label: str) -> RunSettings:
+    """Check the whole form before a run; the first mistake raises UserError (the command line's message)."""
+    from pendulab.cli.simulate import check_run_settings, parse_poke
+
+    controller = parse_controller_form(form.get("controller") or {})
+    stop_time = _number(form.get("stop_time", 5), "stop time")
+    step = _number(form.get("step", 0.001), "control period")
+    delay_value = _number(form.get("delay", 0), "transport delay")
+    if delay_value != int(delay_value):
+        raise UserError(f"transport delay {delay_value:g} must be a whole number of control periods")
+    delay = int(delay_value)
+    check_run_settings(stop_time, step, delay)
+    method = _text(form, "method") or "tustin"
+    if method not in ("tustin", "zoh"):
+        raise UserError(f"discretization {method!r}: choose tustin or zoh")
+    poke_form = form.get("poke") or {}
+    poke = parse_poke(",".join(_text(poke_form, k) for k in ("magnitude", "duration", "start")))
+    if poke[2] >= stop_time:
+        raise UserError(f"the poke starts at t={poke[2]:g} s, not before the stop time {stop_time:g} s; start the poke earlier or lengthen the stop time")
+    params = plant_parameters(form, calibration_path)
+    params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
+    if not form.get("quantization", True):
+        params = params.with_values(q_alpha=0.0, q_x=0.0)
+    meta = {"pendulum": _text(form, "pendulum") or "long", "cart": _text(form, "cart") or "ip02", "calibration": calibration_label, "source": "simulation"}
+    return RunSettings(controller, params, stop_time, step, method, delay, meta)
+
+
+def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[str, Any]:
+    """Root locus of ``Lp·C(s)·G(s)`` with the closed-loop poles, Bode plot and margins, sampled-loop verdict.
+
+    The loop is the one ``pendulab tf --root-locus`` draws: the controller acts on ``e = -Lp·alpha``.
+    """
+    import numpy as np
+
+    from pendulab.analysis.plots import root_locus
+    from pendulab.model.linear import linearize
+
+    controller = parse_controller_form(form.get("controller") or {})
+    params = plant_parameters(form, calibration_path)
+    if params.Mp == 0:
+        raise UserError("the cart without a pendulum has no angle to linearize; choose the long or short pendulum")
+    loop = controller.transfer_function() * linearize(params).tf("tip")
+    rl = root_locus(loop)
+
+    def points(values: Any) -> dict[str, list[float]]:
+        values = np.asarray(values, dtype=complex)
+        return {"re": values.real.tolist(), "im": values.imag.tolist()}
+
+    # Branches with NaN breaks between them: one trace on the page.
+    branches = [points(rl.loci[:, j]) for j in range(rl.loci.shape[1])]
+    bode = _bode(loop)
+    step, method = 0.001, "tustin"
+    try:
+        step = _number((form.get("step") or 0.001), "control period")
+        method = _text(form, "method") or "tustin"
+        delay = int(_number(form.get("delay", 0), "transport delay"))
+    except UserError:
+        delay = 0
+    from pendulab.control.loop import closed_loop_poles
+
+    # The sampled loop as simulated: one sample of computation plus the transport delay.
+    z = closed_loop_poles(controller, params, h=step, method=method if method in ("tustin", "zoh") else "tustin", delay=1 + max(delay, 0))
+    return {
+        "branches": branches,
+        "open_poles": points(rl.poles),
+        "open_zeros": points(rl.zeros),
+        "closed_poles": points(rl.closed),
+        "stable": rl.stable,
+        "view": list(rl.view),
+        "bode": bode,
+        "sampled_stable": bool(np.max(np.abs(z)) < 1),
+        "sampled_max_abs_z": float(np.max(np.abs(z))),
+        "unstable_open_loop_poles": int(np.sum(np.asarray(rl.poles).real > 0)),
+    }
+
+
+def _bode(loop: Any) -> dict[str, Any]:
+    import control
+    import numpy as np
+
+    omega = np.logspace(-1, 4, 400)
+    response = control.frequency_response(loop, omega)
+    mag = np.abs(np.asarray(response.complex).ravel())
+    phase = np.degrees(np.unwrap(np.angle(np.asarray(response.complex).ravel())))
+    gm, pm, _, wpc, wgc, _ = control.stability_margins(loop)
+
+    def finite(x: float) -> float | None:
+        return float(x) if x is not None and math.isfinite(x) else None
+
+    return {
+        "omega": omega.tolist(),
+        "mag_db": (20 * np.log10(np.maximum(mag, 1e-300))).tolist(),
+        "phase_deg": phase.tolist(),
+        "gain_margin_db": finite(20 * math.log10(gm)) if gm and math.isfinite(gm) and gm > 0 else None,
+        "phase_margin_deg": finite(pm),
+        "phase_crossover_rad_s": finite(wpc),
+        "gain_crossover_rad_s": finite(wgc),
+    }
+
+
+def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
+    """Columns (thinned to :data:`MAX_POINTS`), poke start, metrics and files of a run folder or old-lab folder."""
+    import numpy as np
+
+    from pendulab.hil.compare import load_compared
+
+    run = load_compared(folder)
+    n = run.columns["t"].size
+    stride = max(1, math.ceil(n / MAX_POINTS))
+    names = ("t", "alpha", "tip", "x", "voltage")
+    columns = {k: np.asarray(run.columns[k], dtype=float)[::stride].tolist() for k in names if k in run.columns}
+    meta_lp = None
+    if "tip" in run.columns and "alpha" in run.columns:
+        alpha, tip = np.asarray(run.columns["alpha"]), np.asarray(run.columns["tip"])
+        big = np.abs(alpha) > 1e-6
+        meta_lp = float(np.median(tip[big] / alpha[big])) if big.any() else None
+    files = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in DOWNLOADABLE) if folder.is_dir() else []
+    return {
+        "label": label or run.label,
+        "source": run.source,
+        "poke_start": run.poke_start,
+        "columns": columns,
+        "metrics": _json_safe(run.metrics),
+        "files": files,
+        "Lp": meta_lp,
+    }
+
+
+#: Files of a run folder the page may download.
+DOWNLOADABLE = (".mat", ".csv", ".json", ".png", ".gif")
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    try:
+        import numpy as np
+
+        if isinstance(value, np.generic):
+            return _json_safe(value.item())
+    except ImportError:  # pragma: no cover
+        pass
+    return value

@@ -1,0 +1,300 @@
+"""The GUI in a real browser: Debian's Chromium, headless, driven by Selenium through Debian's chromium-driver.
+
+One server and one browser for the module (start-up is most of the cost). Screenshots of each state
+of the page go to ``$PENDULAB_GUI_SCREENSHOTS`` (default: a temporary folder).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+selenium = pytest.importorskip("selenium")
+from selenium import webdriver  # noqa: E402
+from selenium.webdriver.chrome.service import Service  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+DRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+pytestmark = pytest.mark.skipif(not (Path(CHROMIUM).exists() and Path(DRIVER).exists()),
+                                reason="needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)")
+
+DEMO = ("-5", "7", "40000", [("-17", "-80", ""), ("", "-80", "")])
+
+
+def chromium_options(profile: Path, downloads: Path) -> webdriver.ChromeOptions:
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage", "--window-size=1500,1900",
+                 f"--user-data-dir={profile}"):
+        options.add_argument(flag)
+    options.add_experimental_option("prefs", {"download.default_directory": str(downloads), "download.prompt_for_download": False})
+    return options
+
+
+def start_gui(out: Path, cwd: Path) -> tuple[subprocess.Popen, str]:
+    """``pendulab gui --no-browser`` on a free port; returns the process and the URL it printed."""
+    process = subprocess.Popen([sys.executable, "-m", "pendulab", "gui", "--no-browser", "--out", str(out)], cwd=cwd,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = process.stdout.readline()
+    match = re.search(r"(http://\S+/)", line)
+    assert match, f"no URL in {line!r}: {process.stderr.read() if process.poll() is not None else ''}"
+    return process, match.group(1)
+
+
+@pytest.fixture(scope="module")
+def gui(tmp_path_factory):
+    root = tmp_path_factory.mktemp("gui")
+    process, url = start_gui(root / "runs", root)
+    downloads = root / "downloads"
+    downloads.mkdir()
+    driver = webdriver.Chrome(service=Service(DRIVER), options=chromium_options(root / "profile", downloads))
+    driver.execute_cdp_cmd("Page.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(downloads)})
+    shots = Path(os.environ.get("PENDULAB_GUI_SCREENSHOTS") or root / "screenshots")
+    shots.mkdir(parents=True, exist_ok=True)
+    yield {"driver": driver, "url": url, "root": root, "downloads": downloads, "shots": shots, "process": process}
+    driver.quit()
+    process.terminate()
+    process.wait(timeout=10)
+
+
+def wait(driver, condition, timeout=60.0):
+    return WebDriverWait(driver, timeout, poll_frequency=0.1).until(lambda d: condition(d))
+
+
+def shot(gui, name: str) -> None:
+    gui["driver"].save_screenshot(str(gui["shots"] / f"{name}.png"))
+
+
+def type_into(driver, element_id: str, text: str) -> None:
+    element = driver.find_element(By.ID, element_id)
+    element.clear()
+    element.send_keys(text)
+
+
+def enter_kernel(driver, zeros, poles, gain, compensators=()):
+    type_into(driver, "k-zeros", zeros)
+    type_into(driver, "k-poles", poles)
+    type_into(driver, "k-gain", gain)
+    for z, p, k in compensators:
+        driver.find_element(By.ID, "add-comp").click()
+        row = driver.find_elements(By.CSS_SELECTOR, "tr.comp")[-1]
+        for cls, value in (("c-zeros", z), ("c-poles", p), ("c-gain", k)):
+            row.find_element(By.CLASS_NAME, cls).send_keys(value)
+
+
+def status(driver, element_id: str) -> tuple[str, str]:
+    element = driver.find_element(By.ID, element_id)
+    return element.get_attribute("class"), element.text
+
+
+def run_and_wait(driver) -> Path:
+    """Click Run, wait for the run to finish; the run folder the page names."""
+    before = len(driver.find_elements(By.CSS_SELECTOR, "#runs tbody tr"))
+    driver.find_element(By.ID, "run").click()
+    wait(driver, lambda d: len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) > before, 10)
+    wait(driver, lambda d: "results in" in status(d, "run-status")[1] or "error" in status(d, "run-status")[0], 60)
+    cls, text = status(driver, "run-status")
+    assert "ok" in cls, text
+    return Path(text.split("results in ", 1)[1].strip())
+
+
+def cli_error(*argv: str) -> str:
+    """The command line's one-line error for the same input."""
+    done = subprocess.run([sys.executable, "-m", "pendulab", "simulate", *argv, "--out", os.devnull], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    return done.stderr.strip().removeprefix("pendulab: error: ")
+
+
+def page_metrics(driver, run_id: str) -> dict[str, tuple[str, object]]:
+    cells = driver.find_elements(By.CSS_SELECTOR, f'#metrics td[data-run="{run_id}"]')
+    return {c.get_attribute("data-key"): (c.text, json.loads(c.get_attribute("data-value") or "null")) for c in cells}
+
+
+def current_run_id(driver) -> str:
+    return driver.find_element(By.CSS_SELECTOR, "#runs tr.current").get_attribute("data-run")
+
+
+def test_controller_mistake_fix_run_metrics_overlay_download(gui):
+    d = gui["driver"]
+    d.get(gui["url"])
+    wait(d, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-drawn") == "1", 10)
+    shot(gui, "01-first-page")
+
+    # A mistake: a kernel pole exactly at s = 0. The page says what the command line says.
+    enter_kernel(d, "-5", "0", "40000")
+    wait(d, lambda d: "error" in status(d, "controller-status")[0], 10)
+    assert status(d, "controller-status")[1] == cli_error("--zeros", "-5", "--poles", "0", "--gain", "40000")
+    shot(gui, "02-controller-error")
+
+    # Fixed: the demo controller typed by hand; G(s) shown formatted, the linear view drawn.
+    type_into(d, "k-poles", "7")
+    for z, p, k in DEMO[3]:
+        d.find_element(By.ID, "add-comp").click()
+        row = d.find_elements(By.CSS_SELECTOR, "tr.comp")[-1]
+        row.find_element(By.CLASS_NAME, "c-zeros").send_keys(z)
+        row.find_element(By.CLASS_NAME, "c-poles").send_keys(p)
+    wait(d, lambda d: "ok" in status(d, "controller-status")[0], 10)
+    assert status(d, "controller-status")[1].startswith("Gc(s) = 40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)")
+    wait(d, lambda d: "closed loop stable" in d.find_element(By.ID, "linear-verdict").text, 30)
+    assert d.execute_script("return document.getElementById('rootlocus').data.length") >= 4
+    assert "phase margin" in d.find_element(By.ID, "margins").text
+    shot(gui, "03-controller-ok-linear-view")
+
+    type_into(d, "stop-time", "3")
+    folder = run_and_wait(d)
+    shot(gui, "04-first-run")
+    first = current_run_id(d)
+    metrics = json.loads((folder / "metrics.json").read_text())
+    shown = page_metrics(d, first)
+    checked = 0
+    for key, value in metrics.items():
+        if key not in shown:
+            continue
+        text, raw = shown[key]
+        assert raw == value, key  # the page holds the run's own numbers ...
+        if isinstance(value, bool):
+            assert text == ("yes" if value else "no")
+        elif value is None:
+            assert text == "n/a"
+        else:  # ... and shows them to 4 significant digits
+            assert math.isclose(float(text), value, rel_tol=6e-4, abs_tol=1e-12), (key, text, value)
+        checked += 1
+    assert checked >= 8 and metrics["stable"] is True
+
+    # A second run with a harder poke: both overlaid, aligned at the poke, side by side in the table.
+    type_into(d, "poke-mag", "150")
+    second_folder = run_and_wait(d)
+    assert second_folder != folder
+    second = current_run_id(d)
+    assert second != first
+    names = d.execute_script("return document.getElementById('response').data.map(t => t.name)")
+    assert len(names) == 8 and len(set(names)) == 2
+    m2 = json.loads((second_folder / "metrics.json").read_text())
+    assert page_metrics(d, second)["peak_time_s"][1] == m2["peak_time_s"]
+    assert page_metrics(d, first)["peak_time_s"][1] == metrics["peak_time_s"]
+    shot(gui, "05-two-runs-overlaid")
+
+    # Download run.mat of the second run and read it with SciPy.
+    d.find_element(By.CSS_SELECTOR, '#downloads a[download="run.mat"]').click()
+    target = gui["downloads"] / "run.mat"
+    wait(d, lambda d: target.is_file() and not list(gui["downloads"].glob("*.crdownload")), 20)
+    mat = scipy.io.loadmat(target)
+    csv = np.genfromtxt(second_folder / "run.csv", delimiter=",", names=True)
+    assert mat["alpha"].shape == (csv["alpha"].size, 1)
+    np.testing.assert_allclose(mat["alpha"].ravel(), csv["alpha"], rtol=1e-6, atol=1e-12)
+    assert float(mat["meta"]["parameters"][0, 0]["poke_magnitude"][0, 0].ravel()[0]) == 150.0
+
+    # The animation of the rig draws the current run.
+    d.find_element(By.ID, "play").click()
+    wait(d, lambda d: d.find_element(By.ID, "anim-time").text.startswith("t = "), 5)
+
+    # Opening the first run's folder (as a rig run folder would be) adds it to the list.
+    type_into(d, "open-path", str(folder))
+    d.find_element(By.ID, "open-btn").click()
+    wait(d, lambda d: "opened" in status(d, "open-status")[1], 20)
+    assert page_metrics(d, current_run_id(d))["peak_time_s"][1] == metrics["peak_time_s"]
+
+
+def _old_lab_folder(folder: Path) -> Path:
+    """The old lab's logs: one [t, value] .mat per signal, the pendulum upright and poked at 1 s."""
+    folder.mkdir()
+    t = np.arange(0, 3.0, 1e-3)
+    after = np.clip(t - 1.0, 0, None)
+    alpha = np.where(t > 1.0, 0.05 * np.exp(-3 * after) * np.sin(8 * after), 0.0)
+    for name, values in (("angle", alpha), ("position", 0.1 * alpha), ("voltage", 5 * alpha)):
+        scipy.io.savemat(folder / f"{name}.mat", {f"{name}Data": np.column_stack([t, values])})
+    return folder
+
+
+def test_old_lab_folder_and_bad_path(gui):
+    d = gui["driver"]
+    type_into(d, "open-path", str(gui["root"] / "no-such-folder"))
+    d.find_element(By.ID, "open-btn").click()
+    wait(d, lambda d: "error" in status(d, "open-status")[0], 10)
+    assert "does not exist" in status(d, "open-status")[1]
+    type_into(d, "open-path", str(_old_lab_folder(gui["root"] / "oldlab")))
+    d.find_element(By.ID, "open-btn").click()
+    wait(d, lambda d: "opened" in status(d, "open-status")[1], 20)
+    run_id = current_run_id(d)
+    assert "old lab" in d.find_element(By.CSS_SELECTOR, f'#runs tr[data-run="{run_id}"]').text
+    natural = page_metrics(d, run_id)["natural_frequency_rad_s"][1]
+    assert natural == pytest.approx(8.0, rel=0.02)  # the synthetic log's own oscillation, 8 rad/s
+    shot(gui, "06-old-lab-folder")
+
+
+def test_uploads_that_are_not_what_they_claim(gui):
+    d = gui["driver"]
+    fake = gui["root"] / "calibration.json"
+    fake.write_bytes(b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR" + bytes(range(256)) * 4)
+    d.find_element(By.ID, "cal-file").send_keys(str(fake))
+    wait(d, lambda d: "error" in status(d, "cal-status")[0], 10)
+    assert "not a JSON text file" in status(d, "cal-status")[1]
+    shot(gui, "07-upload-renamed-binary")
+
+    huge = gui["root"] / "big.mat"
+    with open(huge, "wb") as f:
+        f.truncate(100_000_000)
+    d.find_element(By.ID, "cal-file").send_keys(str(huge))
+    wait(d, lambda d: "100.0 MB" in status(d, "cal-status")[1], 10)
+    assert "at most 1 MB" in status(d, "cal-status")[1]
+
+    good = gui["root"] / "my_rig.json"
+    from pendulab.calibration.files import default_calibration, save_calibration
+
+    save_calibration(default_calibration(), good)
+    d.find_element(By.ID, "cal-file").send_keys(str(good))
+    wait(d, lambda d: "ok" in status(d, "cal-status")[0], 10)
+    assert d.find_element(By.ID, "calibration").get_attribute("value").startswith("upload:")
+    assert gui["process"].poll() is None  # the server kept running through all of it
+
+
+def test_two_tabs_do_not_mix(gui):
+    d = gui["driver"]
+    first_tab = d.current_window_handle
+    d.switch_to.new_window("tab")
+    d.get(gui["url"])
+    wait(d, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-drawn") == "1", 10)
+    assert d.find_elements(By.CSS_SELECTOR, "#runs tbody tr") == []  # the other tab's runs are not listed here
+    d.find_element(By.ID, "demo").click()
+    wait(d, lambda d: "ok" in status(d, "controller-status")[0], 10)
+    type_into(d, "stop-time", "2.5")
+    type_into(d, "poke-mag", "80")
+    second_tab = d.current_window_handle
+
+    # Start both, then wait for both: they run at the same time.
+    d.find_element(By.ID, "run").click()
+    d.switch_to.window(first_tab)
+    type_into(d, "poke-mag", "30")
+    before = len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr"))
+    d.find_element(By.ID, "run").click()
+    folders = {}
+    for handle, magnitude in ((first_tab, 30.0), (second_tab, 80.0)):
+        d.switch_to.window(handle)
+        wait(d, lambda d: "results in" in status(d, "run-status")[1] and not d.find_element(By.ID, "run").get_attribute("disabled"), 60)
+        folder = Path(status(d, "run-status")[1].split("results in ", 1)[1].strip())
+        folders[handle] = folder
+        mat = scipy.io.loadmat(folder / "run.mat")
+        assert float(mat["meta"]["parameters"][0, 0]["poke_magnitude"][0, 0].ravel()[0]) == magnitude
+        metrics = json.loads((folder / "metrics.json").read_text())
+        run_id = current_run_id(d)
+        assert page_metrics(d, run_id)["peak_time_s"][1] == metrics["peak_time_s"]
+    assert folders[first_tab] != folders[second_tab]
+    d.switch_to.window(second_tab)
+    assert len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) == 1
+    shot(gui, "08-second-tab")
+    d.switch_to.window(first_tab)
+    assert len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) == before + 1
