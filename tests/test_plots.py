@@ -55,7 +55,7 @@ def assert_png(path: Path) -> np.ndarray:
 
 def test_plot_run_writes_overview_and_one_png_per_quantity(tmp_path):
     paths = plot_run(run_columns(), tmp_path / "plots", title="C(s) = 40", poke_start=POKE, safety_cut_time=1.8)
-    assert [p.name for p in paths] == ["run.png", "angle.png", "tip.png", "cart.png", "voltage.png"]
+    assert [p.name for p in paths] == ["run.png", "response.png", "angle.png", "tip.png", "cart.png", "voltage.png"]
     overview = assert_png(paths[0])
     single = assert_png(paths[1])
     assert overview.shape[0] > 2 * single.shape[0]  # four stacked panels
@@ -177,3 +177,55 @@ def test_example_script_is_standalone_and_reports_a_missing_file(tmp_path):
     result = run_script(str(tmp_path / "nope.mat"))
     assert result.returncode != 0
     assert "does not exist" in result.stderr and "Traceback" not in result.stderr
+
+
+def _cut_run_columns() -> tuple[dict[str, np.ndarray], float]:
+    """A run cut at 1.3 s after which the controller's command runs away to -1000 V."""
+    cols = run_columns()
+    t = cols["t"]
+    cut = 1.3
+    after = t >= cut
+    cols["voltage_command"] = np.where(after, -1000.0 * np.clip((t - cut) / 0.2, 0, 1), cols["voltage_command"])
+    cols["voltage"] = np.where(after, 0.0, cols["voltage"])
+    cols["supervisor_state"] = np.where(after, 4.0, 2.0)  # 4 = tripped
+    return cols, cut
+
+
+def _vlines(ax) -> list[float]:
+    return [line.get_xdata()[0] for line in ax.get_lines() if len(line.get_xdata()) == 2 and line.get_xdata()[0] == line.get_xdata()[1]]
+
+
+def test_cut_run_voltage_panel_stays_in_the_amplifier_range_and_marks_the_runaway_command():
+    from pendulab.analysis.plots import run_figures
+
+    cols, cut = _cut_run_columns()
+    figures = dict(run_figures(cols, poke_start=POKE, voltage_limit=10.0))  # the cut is read from supervisor_state
+    overview = figures["run.png"].axes
+    assert len(overview) == 5
+    voltage = figures["voltage.png"].axes[0]
+    lo, hi = voltage.get_ylim()
+    assert -12.0 < lo < -10.0 and 10.0 < hi < 12.0  # the amplifier's range, not -1000 V
+    assert any(line.get_marker() == "v" for line in voltage.get_lines())  # the runaway is marked at the edge
+    assert any("-1e+03 V" in text.get_text() for text in voltage.texts)
+    # Poke and cut on every full-length panel; the zoomed response shows the poke (the cut is later).
+    for ax in overview[1:]:
+        assert sorted(_vlines(ax)) == pytest.approx([POKE, cut]), ax.get_ylabel()
+    response = figures["response.png"].axes[0]
+    assert _vlines(response) == pytest.approx([POKE])
+    lo, hi = response.get_xlim()
+    assert lo == pytest.approx(POKE - 0.01) and hi == pytest.approx(POKE + 0.5)
+    # The zoomed panel holds the first peak of the response (at atan(WD/SIGMA)/WD after the poke).
+    line = response.get_lines()[0]
+    peak_time = line.get_xdata()[np.argmax(line.get_ydata())]
+    assert peak_time - POKE == pytest.approx(np.arctan(WD / SIGMA) / WD, abs=2e-3)
+
+
+def test_stable_run_has_no_cut_mark_and_an_unclipped_command():
+    from pendulab.analysis.plots import run_figures
+
+    cols = run_columns()
+    figures = dict(run_figures(cols, poke_start=POKE))
+    for ax in figures["run.png"].axes:
+        assert _vlines(ax) == pytest.approx([POKE])
+    voltage = figures["voltage.png"].axes[0]
+    assert not voltage.texts and not any(line.get_marker() in ("^", "v") for line in voltage.get_lines())

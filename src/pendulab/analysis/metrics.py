@@ -160,8 +160,11 @@ def compute_metrics(
     finite = np.isfinite(alpha)
     last = t.size if finite.all() else int(np.argmin(finite))
     fallen = np.flatnonzero(np.abs(np.where(finite, alpha, 0.0)) >= FALLEN_ANGLE)
-    if fallen.size:  # the response ends where the pendulum falls (read what came before)
-        last = min(last, int(fallen[0]))
+    if fallen.size:  # the response ends where the pendulum starts its fall (read what came before)
+        first = int(np.searchsorted(t, poke_start))
+        start = _fall_start(alpha, int(fallen[0]), q)
+        # A fall that was already under way at the poke leaves no response to read.
+        last = min(last, start if _fall_run_start(alpha, int(fallen[0])) > first else first)
     window = (t >= poke_start) & (np.arange(t.size) < last)
     if cut is not None:
         window &= t <= cut
@@ -242,7 +245,7 @@ def compute_metrics(
                 metrics["overshoot_percent"] = 100.0 * swing / peak_from_ref
             elif not following and settled:
                 metrics["overshoot_percent"] = 0.0  # came back without swinging past the final value
-            metrics["natural_frequency_rad_s"] = _damped_frequency(tw, aw - reference, about_final[k:])
+            metrics["natural_frequency_rad_s"] = _damped_frequency(tw, aw - reference, about_final[k:], smooth=not _is_quantized(aw, q))
 
     # Stable: no safety cut and the swings do not grow. With stick-slip friction and quantized
     # encoders a balanced pendulum keeps a small limit cycle and never settles in the 2 % band;
@@ -264,6 +267,31 @@ def compute_metrics(
             if peak_dev is not None and cycle[0] >= LIMIT_CYCLE_STEADINESS * peak_dev:
                 metrics["overshoot_percent"] = None  # the "overshoot" would be the limit cycle itself
     return metrics
+
+
+def _fall_run_start(alpha: np.ndarray, fallen: int) -> int:
+    """First index of the one-way stretch of the angle that ends at ``fallen``."""
+    if fallen < 2:
+        return 0
+    segment = alpha[: fallen + 1]
+    direction = 1.0 if segment[-1] >= segment[-2] else -1.0
+    steps = direction * np.diff(segment)
+    back = np.flatnonzero(steps < -1e-12 * max(1.0, float(np.max(np.abs(segment)))))
+    return int(back[-1]) + 1 if back.size else 0
+
+
+def _fall_start(alpha: np.ndarray, fallen: int, q: float) -> int:
+    """Index where the fall that ends past :data:`FALLEN_ANGLE` at ``fallen`` began.
+
+    Walking back from ``fallen``, the fall is the last stretch over which the angle only moved
+    towards it (an encoder's flat steps allowed); it began where the angle left that stretch's first
+    value by more than one encoder step (at least 0.1 mrad), so a settled part before it stays in.
+    """
+    start = _fall_run_start(alpha, fallen)
+    segment = alpha[: fallen + 1]
+    direction = 1.0 if fallen < 1 or segment[-1] >= segment[-2] else -1.0
+    departed = np.flatnonzero(direction * (segment[start:] - segment[start]) > max(q, 1e-4))
+    return start + (int(departed[0]) if departed.size else 0)
 
 
 def _limit_cycle(t: np.ndarray, alpha: np.ndarray, q: float) -> tuple[float, float] | None:
@@ -410,8 +438,23 @@ def _crossing(t: np.ndarray, dev: np.ndarray, left: _Lobe, right: _Lobe) -> floa
     return float(0.5 * (ts[k] + ts[k_end]))
 
 
-def _damped_frequency(t: np.ndarray, dev: np.ndarray, lobes: list[_Lobe]) -> float | None:
-    """Damped frequency from the crossings between successive lobes (or the peak spacing)."""
+def _damped_frequency(t: np.ndarray, dev: np.ndarray, lobes: list[_Lobe], smooth: bool = False) -> float | None:
+    """Damped frequency from the spacing of the swings' extremes (smooth signals), else the crossings.
+
+    The extremes of a damped oscillation ``exp(-s t) sin(w t + phi)`` about a constant are exactly
+    ``pi / w`` apart, and unlike the crossings of the final value they hardly move when the level the
+    angle swings about drifts (a PID's integrator, a cart that drifts into its track limit). For a
+    ``smooth`` signal with at least three closed swings the extremes' times are fitted by a straight
+    line. A staircase (an encoder's reading) has flat extremes whose middles are biased on small
+    swings: there, and with fewer swings, the crossings are used.
+    """
+    closed = [lobe for lobe in lobes if lobe.closed]
+    if smooth and len(closed) >= 3 and len(closed) == len(lobes[: len(closed)]):
+        peaks = np.array([lobe.peak_time for lobe in closed])
+        k = np.arange(peaks.size)
+        half_period = float(np.polyfit(k, peaks, 1)[0])
+        if half_period > 0:
+            return math.pi / half_period
     crossings = np.array([_crossing(t, dev, a, b) for a, b in zip(lobes, lobes[1:])])
     n = crossings.size
     if n >= 3:

@@ -10,7 +10,7 @@ Examples
 >>> t = np.linspace(0, 3, 301)
 >>> cols = {"t": t, "alpha": 0.01 * np.sin(5 * t), "x": 0.02 * t}
 >>> [p.name for p in plot_run(cols, tempfile.mkdtemp(), poke_start=1.0)]
-['run.png', 'angle.png', 'tip.png', 'cart.png', 'voltage.png']
+['run.png', 'response.png', 'angle.png', 'tip.png', 'cart.png', 'voltage.png']
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ class _Panel:
     title: str
     ylabel: str
     draw: Callable[[Axes, np.ndarray, Mapping[str, np.ndarray]], bool]
+    own_xlim: bool = False  # the panel sets its own time range (the zoomed response)
 
 
 def _series(ax: Axes, t: np.ndarray, cols: Mapping[str, np.ndarray], specs: Sequence[tuple[str, float, str, dict]]) -> bool:
@@ -94,6 +95,14 @@ _PANELS = (
 )
 
 
+#: The amplifier's range (V): the voltage panel is limited to it (PlantParameters.V_max).
+DEFAULT_VOLTAGE_LIMIT = 10.0
+#: The zoomed response panel: from the poke to this long after it (s), like the old lab's figures.
+RESPONSE_WINDOW = 0.5
+#: supervisor_state code of a latched trip (pendulab.fmu.models.supervisor.config.TRIPPED).
+_TRIPPED = 4
+
+
 def plot_run(
     columns: Mapping[str, Any],
     out_dir: str | os.PathLike[str],
@@ -101,13 +110,23 @@ def plot_run(
     title: str = "",
     poke_start: float | None = None,
     safety_cut_time: float | None = None,
+    voltage_limit: float | None = None,
 ) -> list[Path]:
-    """Plot a run: one overview with four stacked panels, and each panel on its own.
+    """Plot a run: an overview of stacked panels, and each panel on its own.
 
-    Writes ``run.png`` (angle, tip, cart position and voltage over a shared time axis) and
-    ``angle.png``, ``tip.png``, ``cart.png``, ``voltage.png`` into ``out_dir``. Angles are in
-    degrees, positions in cm. Columns that are missing are left out (a panel with none shows a
-    note). The poke (and a safety cut, if given) is marked with a vertical line on every panel.
+    Writes ``run.png`` (the zoomed response, then angle, tip, cart position and voltage over a
+    shared time axis) and ``response.png``, ``angle.png``, ``tip.png``, ``cart.png``,
+    ``voltage.png`` into ``out_dir``. Angles are in degrees, positions in cm. Columns that are
+    missing are left out (a panel with none shows a note).
+
+    * The poke and the safety cut are marked with vertical lines on every panel. Without
+      ``safety_cut_time`` the cut is read from the ``supervisor_state`` column (first ``tripped``).
+    * The *response* panel is the angle from the poke to :data:`RESPONSE_WINDOW` after it (the old
+      lab's figure); without a poke it is the first half second.
+    * The voltage panel is limited to the amplifier's range (``±voltage_limit`` with a margin): a
+      command beyond it (a controller running away, often thousands of volts after a cut) is drawn
+      clipped, its excursions marked with triangles at the edge and its extreme written in the panel,
+      so that the applied voltage stays readable.
 
     Parameters
     ----------
@@ -119,52 +138,128 @@ def plot_run(
         Title of the overview (e.g. the controller).
     poke_start, safety_cut_time : float, optional
         Times to mark.
+    voltage_limit : float, optional
+        The amplifier's range (V); default :data:`DEFAULT_VOLTAGE_LIMIT` (the IP02's ``V_max``).
 
     Returns
     -------
     list of Path
         The PNG files, overview first.
     """
-    if "t" not in columns:
-        raise ValueError("plot_run needs a time column 't'")
-    cols = {k: np.asarray(v, dtype=float).reshape(-1) for k, v in columns.items()}
-    t = cols["t"]
     out = Path(out_dir)
+    figures = run_figures(columns, title=title, poke_start=poke_start, safety_cut_time=safety_cut_time, voltage_limit=voltage_limit)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"cannot create plot folder {out}: {exc.strerror or exc}; choose another --out") from None
-    marks = [(poke_start, "poke", "C3", "--"), (safety_cut_time, "safety cut", "k", ":")]
+    return [_save(fig, out / name) for name, fig in figures]
 
-    fig = _figure((9.5, 9.0))
-    axes = fig.subplots(len(_PANELS), 1, sharex=True)
-    for ax, panel in zip(axes, _PANELS):
+
+def run_figures(
+    columns: Mapping[str, Any],
+    *,
+    title: str = "",
+    poke_start: float | None = None,
+    safety_cut_time: float | None = None,
+    voltage_limit: float | None = None,
+) -> list[tuple[str, Figure]]:
+    """The figures :func:`plot_run` saves, as ``(file name, Figure)`` pairs, overview first."""
+    if "t" not in columns:
+        raise ValueError("plot_run needs a time column 't'")
+    cols = {k: np.asarray(v, dtype=float).reshape(-1) for k, v in columns.items()}
+    t = cols["t"]
+    if safety_cut_time is None and "supervisor_state" in cols and cols["supervisor_state"].size == t.size:
+        tripped = np.flatnonzero(cols["supervisor_state"] == _TRIPPED)
+        safety_cut_time = float(t[tripped[0]]) if tripped.size else None
+    limit = float(voltage_limit) if voltage_limit is not None else DEFAULT_VOLTAGE_LIMIT
+    marks = [(poke_start, "poke", "C3", "--"), (safety_cut_time, "safety cut", "k", ":")]
+    start = poke_start if poke_start is not None else (float(t[0]) if t.size else 0.0)
+    panels = (_response_panel(start), *_PANELS[:-1], _voltage_panel(limit))
+
+    fig = _figure((9.5, 11.0))
+    axes = fig.subplots(len(panels), 1)
+    for ax, panel in zip(axes, panels):
         _draw_panel(ax, panel, t, cols, marks)
+    for ax in axes[2:]:
+        ax.sharex(axes[1])
+    for ax in axes[1:-1]:
+        ax.tick_params(labelbottom=False)
+    axes[0].set_xlabel("time (s)")
     axes[-1].set_xlabel("time (s)")
     if title:
         fig.suptitle(title)
-    paths = [_save(fig, out / "run.png")]
+    figures = [("run.png", fig)]
 
-    for panel in _PANELS:
+    for panel in panels:
         fig = _figure((9.5, 3.2))
         ax = fig.subplots()
         _draw_panel(ax, panel, t, cols, marks)
         ax.set_title(f"{panel.title}{' - ' + title if title else ''}")
         ax.set_xlabel("time (s)")
-        paths.append(_save(fig, out / panel.file))
-    return paths
+        figures.append((panel.file, fig))
+    return figures
+
+
+def _response_panel(start: float) -> _Panel:
+    """The angle from the poke to RESPONSE_WINDOW after it (x range set by ``_draw_panel``)."""
+    angle = _PANELS[0]
+
+    def draw(ax: Axes, t: np.ndarray, c: Mapping[str, np.ndarray]) -> bool:
+        inside = (t >= start - 0.02 * RESPONSE_WINDOW) & (t <= start + RESPONSE_WINDOW)
+        if not inside.any():
+            return False
+        drawn = angle.draw(ax, t[inside], {k: v[inside] for k, v in c.items() if np.ndim(v) == 1 and len(v) == len(t)})
+        ax.set_xlim(max(float(t[0]), start - 0.02 * RESPONSE_WINDOW), start + RESPONSE_WINDOW)
+        return drawn
+
+    return _Panel("response.png", f"Response to the poke (first {RESPONSE_WINDOW:g} s)", "angle α (deg)", draw, own_xlim=True)
+
+
+def _voltage_panel(limit: float) -> _Panel:
+    """Applied voltage and command, limited to the amplifier's range; a runaway command is marked."""
+    edge = 1.15 * limit
+
+    def draw(ax: Axes, t: np.ndarray, c: Mapping[str, np.ndarray]) -> bool:
+        drawn = _series(ax, t, c, [("voltage", 1.0, "applied (after supervisor)", dict(color="C3", lw=1.6))])
+        command = c.get("voltage_command")
+        if command is not None:
+            finite = np.where(np.isfinite(command), command, 0.0)
+            ax.plot(t, np.clip(finite, -edge, edge), color="k", lw=0.9, ls=(0, (4, 3)), label="command (controller)")
+            beyond = np.abs(finite) > edge
+            if beyond.any():
+                # Mark a few points of each excursion at the panel's edge instead of scaling to them.
+                marks = np.flatnonzero(beyond)[:: max(1, int(beyond.sum()) // 40)]
+                label = f"command beyond ±{limit:g} V (not to scale)"
+                for sign, marker in ((1, "^"), (-1, "v")):
+                    side = marks[np.sign(finite[marks]) == sign]
+                    if side.size:
+                        ax.plot(t[side], np.full(side.size, sign * edge * 0.97), ls="none", marker=marker, ms=5, color="k", label=label)
+                        label = None
+                worst = finite[np.argmax(np.abs(finite))]
+                first = float(t[np.argmax(beyond)])
+                ax.text(0.99, 0.04, f"command runs away from t = {first:.3g} s, to {worst:.3g} V",
+                        transform=ax.transAxes, ha="right", va="bottom", fontsize="small",
+                        bbox=dict(boxstyle="round", fc="white", ec="0.6", alpha=0.9))
+            drawn = True
+        ax.axhspan(limit, edge, color="0.85", zorder=0)
+        ax.axhspan(-edge, -limit, color="0.85", zorder=0)
+        ax.set_ylim(-edge, edge)
+        return drawn
+
+    return _Panel("voltage.png", f"Motor voltage (amplifier range ±{limit:g} V)", "voltage (V)", draw)
 
 
 def _draw_panel(ax: Axes, panel: _Panel, t: np.ndarray, cols: Mapping[str, np.ndarray], marks: list) -> None:
     drawn = panel.draw(ax, t, cols)
     if not drawn:
         ax.text(0.5, 0.5, "not logged in this run", transform=ax.transAxes, ha="center", va="center", color="0.5")
+    lo, hi = ax.get_xlim() if panel.own_xlim else (t[0], t[-1]) if t.size else (0.0, 1.0)
     for when, label, color, style in marks:
-        if when is not None:
+        if when is not None and (not panel.own_xlim or lo <= when <= hi):
             ax.axvline(when, color=color, ls=style, lw=1.0, label=label)
     ax.set_ylabel(panel.ylabel)
     ax.grid(True, alpha=0.3)
-    if t.size:
+    if t.size and not panel.own_xlim:
         ax.set_xlim(t[0], t[-1])
     if drawn:
         # Beside the panel, never over the curves.

@@ -139,7 +139,10 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from pendulab.analysis.plots import plot_run
 
-        written += plot_run(result.columns, out_dir, title=f"{args.pendulum} pendulum: {result.meta['controller']}", poke_start=params.poke_start)
+        written += plot_run(
+            result.columns, out_dir, title=f"{args.pendulum} pendulum: {result.meta['controller']}", poke_start=params.poke_start,
+            safety_cut_time=result.metrics.get("safety_cut_time_s"), voltage_limit=params.V_max,
+        )
     if args.animate:
         from pendulab.analysis.animation import animate_run
 
