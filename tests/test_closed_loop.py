@@ -32,6 +32,8 @@ METRIC_KEYS = {
     "cart_speed_change_m_s",
     "safety_cut_time_s",
     "stable",
+    "limit_cycle_amplitude_rad",  # SPEC §7: the friction and quantization limit cycle (else null)
+    "limit_cycle_frequency_rad_s",
 }
 
 
