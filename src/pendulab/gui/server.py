@@ -18,6 +18,7 @@ import queue as queue_module
 import re
 import secrets
 import shutil
+import sys
 import tempfile
 import threading
 import time
@@ -134,7 +135,8 @@ class GuiState:
         path, label = self.calibration(form.get("calibration"))
         settings = run_settings(form, path, label)
         folder = self.new_folder(settings.meta["pendulum"])
-        run = Run(secrets.token_hex(8), tab, "sim", folder, f"{folder.name}: {settings.controller}", stop_time=settings.stop_time)
+        label = f"{folder.name}: {settings.controller}, {settings.meta['pendulum']}, poke {settings.params.poke_magnitude:g}"
+        run = Run(secrets.token_hex(8), tab, "sim", folder, label, stop_time=settings.stop_time)
         q = self._context.Queue()
         run.process = self._context.Process(target=run_simulation, args=(settings, str(folder), q), daemon=True)
         run.process.start()
@@ -418,6 +420,8 @@ class GuiServer(ThreadingHTTPServer):
     """The threaded server with the GUI's state attached."""
 
     daemon_threads = True
+    # On Windows SO_REUSEADDR lets a second server take a port in use: there, a busy port must fail.
+    allow_reuse_address = sys.platform != "win32"
 
     def __init__(self, host: str, port: int, out_dir: Path) -> None:
         try:
@@ -436,5 +440,7 @@ class GuiServer(ThreadingHTTPServer):
         return f"http://{host if ':' not in host else f'[{host}]'}:{self.port}/"
 
     def server_close(self) -> None:
-        self.state.close()
+        state = getattr(self, "state", None)  # absent when the port could not be opened
+        if state is not None:
+            state.close()
         super().server_close()

@@ -1,0 +1,176 @@
+"""The GUI's server without a browser: where it listens, what it refuses, the same messages as the command line."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import socket
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from pendulab.cli.main import main
+from pendulab.gui.app import check_controller, run_settings
+from pendulab.gui.server import GuiServer
+from pendulab.errors import UserError
+
+TAB = {"X-Pendulab-Tab": "testtab-0001"}
+
+
+@pytest.fixture()
+def server(tmp_path):
+    srv = GuiServer("127.0.0.1", 0, tmp_path / "runs")
+    thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    yield srv
+    srv.shutdown()
+    srv.server_close()
+
+
+def request(srv, method, path, body=None, headers=None):
+    conn = http.client.HTTPConnection("127.0.0.1", srv.port, timeout=30)
+    conn.request(method, path, body=body, headers={**TAB, **(headers or {})})
+    response = conn.getresponse()
+    data = response.read()
+    conn.close()
+    return response.status, json.loads(data) if data[:1] == b"{" else data
+
+
+def test_listens_on_loopback_by_default(tmp_path):
+    process = subprocess.Popen([sys.executable, "-m", "pendulab", "gui", "--no-browser", "--out", str(tmp_path)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith("pendulab GUI at http://127.0.0.1:")
+        port = int(line.split("127.0.0.1:")[1].split("/")[0])
+        listening = [c for c in _listening_sockets() if c[1] == port]
+        assert listening and all(host == "127.0.0.1" for host, _ in listening)
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def _listening_sockets():
+    """(address, port) of the TCP sockets listening on this machine, from /proc (Linux)."""
+    out = []
+    for line in open("/proc/net/tcp").read().splitlines()[1:]:
+        local, state = line.split()[1], line.split()[3]
+        if state == "0A":  # LISTEN
+            address, port = local.split(":")
+            out.append((socket.inet_ntoa(bytes.fromhex(address)[::-1]), int(port, 16)))
+    return out
+
+
+def test_port_in_use_is_one_clear_line(tmp_path, capsys):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        status = main(["gui", "--no-browser", "--port", str(busy.getsockname()[1]), "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1
+    assert "choose another --port" in err
+
+
+@pytest.mark.parametrize(
+    "form, argv",
+    [
+        ({"zeros": "-5", "poles": "0", "gain": "40000"}, ["--zeros=-5", "--poles", "0", "--gain", "40000"]),
+        ({"zeros": "-5,-6,-7", "poles": "7", "gain": "1"}, ["--zeros=-5,-6,-7", "--poles", "7", "--gain", "1"]),
+        ({"zeros": "-1+2j", "poles": "-3", "gain": "1"}, ["--zeros=-1+2j", "--poles=-3", "--gain", "1"]),
+        ({"zeros": "", "poles": "-3", "gain": "abc"}, ["--zeros", "", "--poles=-3", "--gain", "abc"]),
+        ({"zeros": "-5", "poles": "7", "gain": "1", "compensators": [{"zeros": "-17", "poles": "x"}]},
+         ["--zeros=-5", "--poles", "7", "--gain", "1", "--compensator=-17;x;"]),
+        ({"mode": "pid", "pid": {"kp": "0", "ki": "0", "kd": "0"}}, ["--pid", "0,0,0"]),
+    ],
+)
+def test_controller_messages_are_the_command_lines(form, argv, capsys, tmp_path):
+    answer = check_controller({"mode": "kernel", **form})
+    assert answer["ok"] is False
+    assert main(["simulate", *argv, "--out", str(tmp_path / "never")]) == 2
+    assert capsys.readouterr().err.strip() == f"pendulab: error: {answer['error']}"
+    assert not (tmp_path / "never").exists()
+
+
+def test_settings_messages_are_the_command_lines(capsys, tmp_path):
+    form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "2", "delay": "9",
+            "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}}
+    with pytest.raises(UserError) as exc:
+        run_settings(form, None, "default")
+    assert main(["simulate", "--demo", "--stop-time", "2", "--delay", "9", "--out", str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err.strip() == f"pendulab: error: {exc.value}"
+    with pytest.raises(UserError, match="poke starts at t=3"):
+        run_settings({**form, "delay": "0", "poke": {"magnitude": "50", "duration": "0.005", "start": "3"}}, None, "default")
+
+
+def test_pages_and_refusals(server):
+    status, page = request(server, "GET", "/")
+    assert status == 200 and b"pendulab" in page
+    status, js = request(server, "GET", "/static/plotly.min.js")
+    assert status == 200 and len(js) > 1_000_000  # the real library, served from the installed wheel
+    # A request from another site (no tab header) or through another host name (DNS rebinding): refused.
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=10)
+    conn.request("POST", "/api/run", body=b"{}", headers={"Content-Type": "text/plain"})
+    assert conn.getresponse().status == 403
+    conn.close()
+    status, answer = request(server, "GET", "/api/runs", headers={"Host": f"evil.example:{server.port}"})
+    assert status == 403
+    assert request(server, "GET", "/files/0123456789abcdef/..%2F..%2Fetc%2Fpasswd")[0] == 404
+    assert request(server, "GET", "/static/../server.py")[0] == 404
+    status, answer = request(server, "POST", "/api/run", body=b"not json")
+    assert status == 400 and "JSON" in answer["error"]
+
+
+def test_upload_of_100_mb_gets_a_message_and_the_server_goes_on(server, tmp_path):
+    big = tmp_path / "calibration.json"
+    with open(big, "wb") as f:
+        f.truncate(100_000_000)
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=60)
+    with open(big, "rb") as body:
+        conn.request("POST", "/api/calibration", body=body, headers={**TAB, "X-Filename": "calibration.json",
+                                                                      "Content-Length": str(big.stat().st_size)})
+        response = conn.getresponse()
+        answer = json.loads(response.read())
+    conn.close()
+    assert response.status == 413 and "calibration.json is 100.0 MB" in answer["error"]
+    status, answer = request(server, "GET", "/api/calibrations")
+    assert status == 200 and [c["key"] for c in answer["calibrations"]] == ["default"]
+
+
+@pytest.mark.parametrize(
+    "name, body, message",
+    [
+        ("cal.json", b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR" + bytes(300), "not a JSON text file"),
+        ("cal.mat", b"PK\x03\x04" + bytes(300), "not a MATLAB .mat file"),
+        ("cal.json", b'{"friction": "lots"}', "cal.json"),
+        ("cal.exe", b"MZ" + bytes(10), "JSON (.json) or the old lab's MATLAB file"),
+        ("cal.mat", b"MATLAB 5.0 MAT-file" + bytes(200), "cal.mat"),
+    ],
+)
+def test_uploads_that_are_not_calibrations(server, name, body, message):
+    status, answer = request(server, "POST", "/api/calibration", body=body, headers={"X-Filename": name})
+    assert status == 400 and message in answer["error"]
+    assert str(server.state.uploads) not in answer["error"]  # the message names the user's file, not ours
+    assert request(server, "GET", "/api/calibrations")[1]["calibrations"] == [{"key": "default", "label": "default (the lab's)"}]
+
+
+def test_linear_view_matches_the_python_api(server):
+    import numpy as np
+
+    from pendulab.control.controller import demo_controller
+    from pendulab.model.linear import linearize
+    from pendulab.model.parameters import PlantParameters
+
+    form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000",
+                           "compensators": [{"zeros": "-17", "poles": "-80"}, {"zeros": "", "poles": "-80"}]}, "pendulum": "short"}
+    status, answer = request(server, "POST", "/api/linear", body=json.dumps(form).encode())
+    assert status == 200 and answer["ok"], answer
+    # The closed-loop poles are the roots of 1 + Lp C(s) G(s), computed here independently.
+    loop = demo_controller().transfer_function() * linearize(PlantParameters.preset("short")).tf("tip")
+    expected = np.sort_complex(np.roots(np.polyadd(loop.den[0][0], loop.num[0][0])))
+    got = np.sort_complex(np.array(answer["closed_poles"]["re"]) + 1j * np.array(answer["closed_poles"]["im"]))
+    np.testing.assert_allclose(got, expected, rtol=1e-6)
+    assert answer["stable"] is bool(np.all(expected.real < 0)) is True
+    mag = np.abs(np.polyval(loop.num[0][0], 10j) / np.polyval(loop.den[0][0], 10j))
+    np.testing.assert_allclose(np.interp(1.0, np.log10(answer["bode"]["omega"]), answer["bode"]["mag_db"]), 20 * np.log10(mag), atol=0.05)
