@@ -147,16 +147,22 @@ def test_controller_mistake_fix_run_metrics_overlay_download(gui):
         row = d.find_elements(By.CSS_SELECTOR, "tr.comp")[-1]
         row.find_element(By.CLASS_NAME, "c-zeros").send_keys(z)
         row.find_element(By.CLASS_NAME, "c-poles").send_keys(p)
-    wait(d, lambda d: "ok" in status(d, "controller-status")[0], 10)
-    assert status(d, "controller-status")[1].startswith("Gc(s) = 40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)")
+    expected = "Gc(s) = 40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)"  # as 'pendulab simulate' prints it
+    wait(d, lambda d: status(d, "controller-status")[1].startswith(expected), 10)
+    assert "ok" in status(d, "controller-status")[0]
     wait(d, lambda d: "closed loop stable" in d.find_element(By.ID, "linear-verdict").text, 30)
     assert d.execute_script("return document.getElementById('rootlocus').data.length") >= 4
     assert "phase margin" in d.find_element(By.ID, "margins").text
     shot(gui, "03-controller-ok-linear-view")
 
     type_into(d, "stop-time", "3")
-    folder = run_and_wait(d)
-    shot(gui, "04-first-run")
+    d.find_element(By.ID, "run").click()
+    wait(d, lambda d: d.find_element(By.ID, "progress-box").is_displayed(), 10)  # progress while it runs
+    shot(gui, "04-running")
+    wait(d, lambda d: "results in" in status(d, "run-status")[1], 60)
+    folder = Path(status(d, "run-status")[1].split("results in ", 1)[1].strip())
+    assert not d.find_element(By.ID, "progress-box").is_displayed()
+    shot(gui, "05-first-run")
     first = current_run_id(d)
     metrics = json.loads((folder / "metrics.json").read_text())
     shown = page_metrics(d, first)
@@ -186,7 +192,7 @@ def test_controller_mistake_fix_run_metrics_overlay_download(gui):
     m2 = json.loads((second_folder / "metrics.json").read_text())
     assert page_metrics(d, second)["peak_time_s"][1] == m2["peak_time_s"]
     assert page_metrics(d, first)["peak_time_s"][1] == metrics["peak_time_s"]
-    shot(gui, "05-two-runs-overlaid")
+    shot(gui, "06-two-runs-overlaid")
 
     # Download run.mat of the second run and read it with SciPy.
     d.find_element(By.CSS_SELECTOR, '#downloads a[download="run.mat"]').click()
@@ -197,6 +203,11 @@ def test_controller_mistake_fix_run_metrics_overlay_download(gui):
     assert mat["alpha"].shape == (csv["alpha"].size, 1)
     np.testing.assert_allclose(mat["alpha"].ravel(), csv["alpha"], rtol=1e-6, atol=1e-12)
     assert float(mat["meta"]["parameters"][0, 0]["poke_magnitude"][0, 0].ravel()[0]) == 150.0
+
+    # The command line's PNG plots, made on request and offered for download.
+    d.find_element(By.ID, "make-plots").click()
+    wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, '#downloads a[download="run.png"]'), 60)
+    assert (second_folder / "run.png").is_file()
 
     # The animation of the rig draws the current run.
     d.find_element(By.ID, "play").click()
@@ -233,7 +244,7 @@ def test_old_lab_folder_and_bad_path(gui):
     assert "old lab" in d.find_element(By.CSS_SELECTOR, f'#runs tr[data-run="{run_id}"]').text
     natural = page_metrics(d, run_id)["natural_frequency_rad_s"][1]
     assert natural == pytest.approx(8.0, rel=0.02)  # the synthetic log's own oscillation, 8 rad/s
-    shot(gui, "06-old-lab-folder")
+    shot(gui, "07-old-lab-folder")
 
 
 def test_uploads_that_are_not_what_they_claim(gui):
@@ -243,7 +254,7 @@ def test_uploads_that_are_not_what_they_claim(gui):
     d.find_element(By.ID, "cal-file").send_keys(str(fake))
     wait(d, lambda d: "error" in status(d, "cal-status")[0], 10)
     assert "not a JSON text file" in status(d, "cal-status")[1]
-    shot(gui, "07-upload-renamed-binary")
+    shot(gui, "08-upload-renamed-binary")
 
     huge = gui["root"] / "big.mat"
     with open(huge, "wb") as f:
@@ -269,8 +280,13 @@ def test_two_tabs_do_not_mix(gui):
     d.get(gui["url"])
     wait(d, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-drawn") == "1", 10)
     assert d.find_elements(By.CSS_SELECTOR, "#runs tbody tr") == []  # the other tab's runs are not listed here
+    d.find_element(By.ID, "mode-pid").click()
+    assert not d.find_element(By.ID, "kernel-entry").is_displayed()
+    wait(d, lambda d: "Gc(s) =" in status(d, "controller-status")[1], 10)
+    assert status(d, "controller-status")[1].startswith(f"Gc(s) = {__import__('pendulab.control', fromlist=['Controller']).Controller.pid(40, 5, 4)}")
+    shot(gui, "09-pid-entry")
     d.find_element(By.ID, "demo").click()
-    wait(d, lambda d: "ok" in status(d, "controller-status")[0], 10)
+    wait(d, lambda d: "(s + 80)^2" in status(d, "controller-status")[1], 10)
     type_into(d, "stop-time", "2.5")
     type_into(d, "poke-mag", "80")
     second_tab = d.current_window_handle
@@ -295,6 +311,6 @@ def test_two_tabs_do_not_mix(gui):
     assert folders[first_tab] != folders[second_tab]
     d.switch_to.window(second_tab)
     assert len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) == 1
-    shot(gui, "08-second-tab")
+    shot(gui, "10-second-tab")
     d.switch_to.window(first_tab)
     assert len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) == before + 1
