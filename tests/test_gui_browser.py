@@ -284,9 +284,13 @@ def test_two_tabs_do_not_mix(gui):
     assert not d.find_element(By.ID, "kernel-entry").is_displayed()
     wait(d, lambda d: "Gc(s) =" in status(d, "controller-status")[1], 10)
     assert status(d, "controller-status")[1].startswith(f"Gc(s) = {__import__('pendulab.control', fromlist=['Controller']).Controller.pid(40, 5, 4)}")
+    # The linear view follows the controller: PID cannot stabilize this plant (its zero at s = 0 and
+    # one unstable pole need an unstable controller), the demo controller does.
+    wait(d, lambda d: "closed loop UNSTABLE" in d.find_element(By.ID, "linear-verdict").text, 30)
     shot(gui, "09-pid-entry")
     d.find_element(By.ID, "demo").click()
     wait(d, lambda d: "(s + 80)^2" in status(d, "controller-status")[1], 10)
+    wait(d, lambda d: "closed loop stable" in d.find_element(By.ID, "linear-verdict").text, 30)
     type_into(d, "stop-time", "2.5")
     type_into(d, "poke-mag", "80")
     second_tab = d.current_window_handle

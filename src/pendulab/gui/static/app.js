@@ -211,6 +211,8 @@ async function startRun() {
   if (!answer.ok) { setStatus(status, false, answer.error); return; }
   const run = await addRun(answer.run);
   $("run").disabled = true;
+  $("progress").value = 0;
+  $("progress-text").textContent = "starting the simulation…";
   $("progress-box").hidden = false;
   try {
     for (;;) {
