@@ -264,3 +264,43 @@ def test_encoders_count_every_edge_at_1_5_m_per_s_and_20_rad_per_s(tmp_path):
     assert max(isr[v]["max"] for v in (1, 2, 3, 4)) < 100
     assert max(prof["encoder_latency_max"]) < 240  # below the 15 us between cart edges at 1.5 m/s
     assert busy < 0.55  # bench/firmware.py gives the verdict against the 50 % bar; this guards regressions
+
+
+def test_track_limit_cuts_the_motor_until_cleared_inside_and_a_fault_latches():
+    """The cart (driven at 0.5 m/s over +-0.4 m) leaves a +-0.1 m track: 0 V, latched; a clear while it is
+    outside does not re-arm; a clear once it is back inside does. Then the amplifier's fault input: 0 V
+    until the next reset, whatever the host sends."""
+    from pendulab.hil import protocol as P
+    from pendulab.hil.link import RigLink
+
+    with twin("--kinematic", "0.5,0,4", "--fault-after", "2.5") as t, RigLink.open(t.port) as link:
+        link.identify()
+        link.configure(delay=2, x_limit=0.1)
+        link.stream(True)
+        seen, clear_next = [], False
+        for k in range(2900):
+            sample, _ = link.next_sample(0.5)
+            seen.append(sample)
+            # Ask for a clear every 50 ms: it must only take while the cart is inside.
+            link.command(sample.seq, 1.0, enable=True, clear=k % 50 == 0)
+        link.stream(False)
+        t.wait_for("amplifier fault input active")
+    c = 0
+    xs = []
+    for s in seen:
+        c = P.unwrap16(c, s.cart)
+        xs.append(c / 43956.04)
+    xs = np.asarray(xs)
+    limit = np.array([bool(s.status & P.ST_LIMIT) for s in seen])
+    volts = np.array([s.voltage_mv for s in seen])
+    outside = np.abs(xs) > 0.1 + 1e-4
+    assert outside.any() and (~outside).any()
+    assert limit[outside].all() and (volts[outside] == 0).all()  # never driven outside the track
+    # Re-armed inside: some samples inside after an excursion are enabled at 1 V again.
+    first_out = int(np.argmax(outside))
+    back = (~outside) & (np.arange(len(seen)) > first_out) & ~limit
+    assert back.any() and (volts[back] == 1000).any()
+    fault = np.array([bool(s.status & P.ST_FAULT) for s in seen])
+    assert fault.any()
+    first_fault = int(np.argmax(fault))
+    assert fault[first_fault:].all() and (volts[first_fault:] == 0).all()

@@ -474,6 +474,10 @@ static void person(double t) {
     }
     if (since >= 0 && fault_after >= 0 && since >= fault_after && !faulted) {
         faulted = 1;
+        /* Driven low from outside: in simavr 1.6 an internal pull-up re-raises a plain input pin at every
+         * write to its port, an 'external' value wins over it. */
+        avr_ioport_external_t e = {.name = 'A', .mask = 1 << 5, .value = 0};
+        avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('A'), &e);
         avr_raise_irq(fault_pin, 0);
         say("amplifier fault input active");
     }
