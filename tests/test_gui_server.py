@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import http.client
 import json
+import signal
 import socket
 import subprocess
 import sys
@@ -47,9 +48,13 @@ def test_listens_on_loopback_by_default(tmp_path):
         port = int(line.split("127.0.0.1:")[1].split("/")[0])
         listening = [c for c in _listening_sockets() if c[1] == port]
         assert listening and all(host == "127.0.0.1" for host, _ in listening)
+        process.send_signal(signal.SIGINT)  # Ctrl-C: a clean stop, no traceback
+        _, err = process.communicate(timeout=10)
+        assert process.returncode == 0 and err.strip() == "pendulab GUI stopped"
     finally:
-        process.terminate()
-        process.wait(timeout=10)
+        if process.poll() is None:
+            process.kill()
+            process.wait(timeout=10)
 
 
 def _listening_sockets():
@@ -174,3 +179,14 @@ def test_linear_view_matches_the_python_api(server):
     assert answer["stable"] is bool(np.all(expected.real < 0)) is True
     mag = np.abs(np.polyval(loop.num[0][0], 10j) / np.polyval(loop.den[0][0], 10j))
     np.testing.assert_allclose(np.interp(1.0, np.log10(answer["bode"]["omega"]), answer["bode"]["mag_db"]), 20 * np.log10(mag), atol=0.05)
+
+
+def test_a_run_with_bad_settings_is_refused_with_the_command_lines_message(server, capsys, tmp_path):
+    form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "1",
+            "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}}
+    status, answer = request(server, "POST", "/api/run", body=json.dumps(form).encode())
+    assert status == 400
+    assert main(["simulate", "--demo", "--stop-time", "1", "--poke", "50,0.005,1", "--out", str(tmp_path / "x")]) == 2
+    cli = capsys.readouterr().err.strip().removeprefix("pendulab: error: ")
+    assert answer["error"] == cli.replace("--stop-time", "the stop time")
+    assert not list((tmp_path / "runs").glob("*")) if (tmp_path / "runs").exists() else True

@@ -38,12 +38,12 @@ def run(args: argparse.Namespace) -> int:
     server = GuiServer(args.host, args.port, args.out)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: listening on {args.host}: other machines on the network can use this GUI", file=sys.stderr)
-    print(f"pendulab GUI at {server.url} (Ctrl-C to stop)", flush=True)
-    if not args.no_browser:
-        import webbrowser
-
-        threading.Thread(target=webbrowser.open, args=(server.url,), daemon=True).start()
     try:
+        print(f"pendulab GUI at {server.url} (Ctrl-C to stop)", flush=True)
+        if not args.no_browser:
+            import webbrowser
+
+            threading.Thread(target=webbrowser.open, args=(server.url,), daemon=True).start()
         server.serve_forever(poll_interval=0.2)
     except KeyboardInterrupt:
         print("pendulab GUI stopped", file=sys.stderr)

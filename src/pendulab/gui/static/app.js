@@ -150,6 +150,10 @@ const updateLinear = debounce(async () => {
     legend: { font: { size: 10 } },
   }, { responsive: true, displaylogo: false });
   const b = answer.bode;
+  // The margins drawn where they are read: at the gain crossover (phase margin) and phase crossover (gain margin).
+  const marks = [];
+  if (b.gain_crossover_rad_s) marks.push({ type: "line", xref: "x", yref: "paper", x0: b.gain_crossover_rad_s, x1: b.gain_crossover_rad_s, y0: 0, y1: 1, line: { dash: "dash", color: "#2ca02c" } });
+  if (b.phase_crossover_rad_s) marks.push({ type: "line", xref: "x", yref: "paper", x0: b.phase_crossover_rad_s, x1: b.phase_crossover_rad_s, y0: 0, y1: 1, line: { dash: "dot", color: "#d62728" } });
   Plotly.react("bode", [
     { x: b.omega, y: b.mag_db, name: "|L| (dB)", line: { color: "#1f77b4" } },
     { x: b.omega, y: b.phase_deg, name: "phase (°)", yaxis: "y2", line: { color: "#ff7f0e" } },
@@ -158,10 +162,12 @@ const updateLinear = debounce(async () => {
     grid: { rows: 2, columns: 1 },
     xaxis: { type: "log", title: { text: "ω (rad/s)" } },
     yaxis: { title: { text: "dB" }, domain: [0.55, 1] }, yaxis2: { title: { text: "deg" }, domain: [0, 0.45], anchor: "x" },
+    shapes: marks,
   }, { responsive: true, displaylogo: false });
-  const f = (v, u) => (v === null || v === undefined ? "none" : `${Number(v).toPrecision(3)} ${u}`);
-  $("margins").textContent = `gain margin ${f(b.gain_margin_db, "dB")} at ${f(b.phase_crossover_rad_s, "rad/s")}; ` +
-    `phase margin ${f(b.phase_margin_deg, "°")} at ${f(b.gain_crossover_rad_s, "rad/s")}` +
+  const f = (v, u) => `${Number(v).toPrecision(3)} ${u}`;
+  const gm = b.gain_margin_db === null ? "gain margin: none (the phase never crosses -180°)" : `gain margin ${f(b.gain_margin_db, "dB")} at ${f(b.phase_crossover_rad_s, "rad/s")} (red dotted)`;
+  const pm = b.phase_margin_deg === null ? "phase margin: none (|L| never crosses 0 dB)" : `phase margin ${f(b.phase_margin_deg, "°")} at ${f(b.gain_crossover_rad_s, "rad/s")} (green dashed)`;
+  $("margins").textContent = `${gm}; ${pm}` +
     (answer.unstable_open_loop_poles ? ` (the open loop has ${answer.unstable_open_loop_poles} unstable pole(s): read stability from the closed-loop poles, not from the margins alone)` : "");
   $("linear-verdict").textContent = (answer.stable ? "closed loop stable" : "closed loop UNSTABLE") +
     `; sampled loop with delay: ${answer.sampled_stable ? "stable" : "UNSTABLE"} (max |z| = ${answer.sampled_max_abs_z.toFixed(5)})`;
