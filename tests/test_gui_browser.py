@@ -293,6 +293,7 @@ def test_two_tabs_do_not_mix(gui):
     wait(d, lambda d: "closed loop stable" in d.find_element(By.ID, "linear-verdict").text, 30)
     type_into(d, "stop-time", "2.5")
     type_into(d, "poke-mag", "80")
+    type_into(d, "delay", "2")  # the transport delay reaches the simulation (run.mat's meta says so)
     second_tab = d.current_window_handle
 
     # Start both, then wait for both: they run at the same time.
@@ -302,13 +303,14 @@ def test_two_tabs_do_not_mix(gui):
     before = len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr"))
     d.find_element(By.ID, "run").click()
     folders = {}
-    for handle, magnitude in ((first_tab, 30.0), (second_tab, 80.0)):
+    for handle, magnitude, delay in ((first_tab, 30.0, 0), (second_tab, 80.0, 2)):
         d.switch_to.window(handle)
         wait(d, lambda d: "results in" in status(d, "run-status")[1] and not d.find_element(By.ID, "run").get_attribute("disabled"), 60)
         folder = Path(status(d, "run-status")[1].split("results in ", 1)[1].strip())
         folders[handle] = folder
         mat = scipy.io.loadmat(folder / "run.mat")
         assert float(mat["meta"]["parameters"][0, 0]["poke_magnitude"][0, 0].ravel()[0]) == magnitude
+        assert float(mat["meta"]["delay"][0, 0].ravel()[0]) == delay
         metrics = json.loads((folder / "metrics.json").read_text())
         run_id = current_run_id(d)
         assert page_metrics(d, run_id)["peak_time_s"][1] == metrics["peak_time_s"]

@@ -190,3 +190,23 @@ def test_a_run_with_bad_settings_is_refused_with_the_command_lines_message(serve
     cli = capsys.readouterr().err.strip().removeprefix("pendulab: error: ")
     assert answer["error"] == cli.replace("--stop-time", "the stop time")
     assert not list((tmp_path / "runs").glob("*")) if (tmp_path / "runs").exists() else True
+
+
+def test_calibrations_from_the_calibration_folder(tmp_path, monkeypatch):
+    from pendulab.calibration.files import default_calibration, save_calibration
+    from pendulab.gui.app import plant_parameters
+
+    calibration = default_calibration()
+    save_calibration(calibration, tmp_path / "calibration" / "fitted.json")
+    monkeypatch.chdir(tmp_path)
+    srv = GuiServer("127.0.0.1", 0, tmp_path / "runs")
+    try:
+        assert "file:fitted.json" in srv.state.calibrations
+        path, label = srv.state.calibration("file:fitted.json")
+        assert label == "calibration/fitted.json"
+        params = plant_parameters({"pendulum": "short"}, path)
+        assert params.Lp == pytest.approx(0.3365)
+        with pytest.raises(UserError, match="not in the list"):
+            srv.state.calibration("file:../../etc/passwd")
+    finally:
+        srv.server_close()
