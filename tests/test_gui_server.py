@@ -210,3 +210,22 @@ def test_calibrations_from_the_calibration_folder(tmp_path, monkeypatch):
             srv.state.calibration("file:../../etc/passwd")
     finally:
         srv.server_close()
+
+
+def test_upload_of_the_old_labs_mat_calibration(server, tmp_path):
+    import io
+
+    import scipy.io
+
+    from pendulab.calibration.files import load_calibration
+
+    buffer = io.BytesIO()
+    scipy.io.savemat(buffer, {"measuredData": [[0.5, 0.05, 3.0, 0.0]]})
+    status, answer = request(server, "POST", "/api/calibration", body=buffer.getvalue(), headers={"X-Filename": "measured.mat"})
+    assert status == 200 and answer["ok"] and answer["label"] == "uploaded: measured.mat"
+    path, label = server.state.calibration(answer["key"])
+    friction = load_calibration(path).friction
+    assert friction[0] == 0.5 and friction[2] == 2.0  # [F1 v1 B unused] as the old lab read it: F2 = 4 F1
+    form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "calibration": answer["key"]}
+    status, linear = request(server, "POST", "/api/linear", body=json.dumps(form).encode())
+    assert status == 200 and linear["ok"]
