@@ -26,5 +26,12 @@ class CalibrationError(UserError):
     """A calibration file or a calibration log cannot be used."""
 
 
+class FitRejected(CalibrationError):
+    """A fit whose answer is not a calibration: a parameter the logs cannot identify, or values whose
+    forward simulation misses the log by far more than the encoder step. Exit status 3."""
+
+    exit_status = 3
+
+
 class FmuBuildError(RuntimeError):
     """Building an FMU failed (no C compiler, compiler error)."""

@@ -34,6 +34,12 @@ standard deviation of 100 % of the starting value in units of the measurement no
 parameters that the logs cannot show at their starting values (their uncertainty is then about
 100 %) and moves well-determined ones by far less than their uncertainty.
 
+*Forward check.* The answer is always replayed through the plant under the true (switching)
+stick-slip law over the whole log (:func:`_forward_simulation`; logs with an upright pendulum, which
+is open-loop unstable, restart every second from the fit's state estimate), and the RMS and largest
+position error are reported and stored in the calibration file. ``pendulab fit`` refuses (exit status
+3) an answer whose replay misses by more than :attr:`FitResult.forward_limit`.
+
 *Uncertainty.* ``cov = (J^T J)^-1 * sigma^2`` with ``J`` the Jacobian of all residuals with respect
 to all unknowns (parameters and shooting nodes) at the solution and ``sigma^2 = r^T r / (N - n)``;
 the parameters' block is their covariance with the nodes eliminated, and the reported standard
@@ -66,7 +72,7 @@ import numpy as np
 
 from pendulab.calibration.files import FITTED_NAMES, Calibration
 from pendulab.calibration.logs import RampLog
-from pendulab.errors import CalibrationError
+from pendulab.errors import CalibrationError, FitRejected
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
 #: What ``fit_parameters`` fits by default.
@@ -117,6 +123,20 @@ class FitResult:
     status: str
     seconds: float
     curves: tuple[FitCurve, ...] = field(default=(), repr=False)
+    forward_rms: float = math.nan  # position error of the forward simulation (m), see forward_check
+    forward_max: float = math.nan
+    encoder_step: float = 0.0
+    travel: float = 0.0  # largest peak-to-peak cart position of the logs (m)
+
+    @property
+    def forward_limit(self) -> float:
+        """The largest accepted forward-simulation RMS (m), see :data:`FORWARD_LIMIT_STEPS`."""
+        return max(FORWARD_LIMIT_STEPS * max(self.encoder_step, 1e-6), FORWARD_LIMIT_TRAVEL * self.travel)
+
+    @property
+    def forward_ok(self) -> bool:
+        """The forward simulation reproduces the logs (RMS within :attr:`forward_limit`)."""
+        return bool(math.isfinite(self.forward_rms) and self.forward_rms <= self.forward_limit)
 
     def to_calibration(self, **metadata: Any) -> Calibration:
         """A calibration file's content: the full friction vector (fitted or kept) and the fitted extras."""
@@ -127,6 +147,10 @@ class FitResult:
             "uncertainty": self.uncertainty,
             "initial": self.initial,
             "residual_rms_m": self.residual_rms,
+            "forward_simulation_rms_m": self.forward_rms,
+            "forward_simulation_max_m": self.forward_max,
+            "encoder_step_m": self.encoder_step,
+            "forward_simulation_limit_m": self.forward_limit,
             "samples": self.n_samples,
             "solver_status": self.status,
         }
@@ -142,7 +166,25 @@ class FitResult:
             f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
             f"{self.iterations} IPOPT iterations, {self.seconds:.2f} s ({self.status})"
         )
+        lines.append(
+            f"forward simulation (true stick-slip law, the whole log): position error RMS {self.forward_rms * 1e6:.1f} um, "
+            f"max {self.forward_max * 1e6:.1f} um (encoder step {self.encoder_step * 1e6:.1f} um, accepted up to "
+            f"{self.forward_limit * 1e6:.0f} um RMS)"
+        )
         return "\n".join(lines)
+
+
+#: A fit is rejected when its forward simulation misses the logs (RMS) by more than this many
+#: encoder steps and by more than FORWARD_LIMIT_TRAVEL of the cart's travel in the logs. A replay of
+#: stick-slip motion is extremely sensitive: on a 13 s ramp log, F1 0.1 % off moves the replay by
+#: 60 um (3 encoder steps) and Beq 1 % off by 0.3 mm, because a later breakaway shifts everything
+#: after it. Values a few per cent off therefore stay under a few per cent of the travel, while
+#: values 16 % off (or wrong units) miss by far more.
+FORWARD_LIMIT_STEPS = 10.0
+FORWARD_LIMIT_TRAVEL = 0.03
+#: Logs with an upright pendulum are open-loop unstable: the forward simulation restarts from the
+#: fit's state estimate every this many seconds instead of running the whole log at once.
+FORWARD_WINDOW_UNSTABLE = 1.0
 
 
 # ---------------------------------------------------------------------- the fit's model
@@ -237,8 +279,11 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
             raise CalibrationError(
                 f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um); a fit needs a log where it breaks away and moves"
             )
-        if np.ptp(log.V) == 0:
-            raise CalibrationError(f"{where}: the voltage is constant; a fit needs the logged voltage ramps")
+        if np.ptp(log.V) <= 1e-3 * max(1.0, float(np.max(np.abs(log.V)))):
+            raise FitRejected(
+                f"{where}: the voltage is constant ({float(np.mean(log.V)):.3g} V), so the force gain, Beq and the friction "
+                "cannot be told apart (a steady speed fits any of them); log ramps, steps or a sweep of the voltage"
+            )
         if with_pendulum and log.alpha is None:
             raise CalibrationError(f"{where} has no alpha column; fitting with a pendulum needs the logged angle (or use --pendulum none)")
         steps = np.diff(log.t)
@@ -401,11 +446,17 @@ def fit_parameters(
     rms = float(np.sqrt(np.mean(errors**2)))
     curves = []
     _, nodes = problem.split(w_opt)
+    forward_errors = []
     for y, b, S in zip(outputs, blocks, nodes):
-        x0_state = np.r_[S[:, 0], np.zeros(4 - ns)]
-        simulated = _simulate_plant(b.log, params, x0_state)[: b.used]
+        simulated = _forward_simulation(b, params, S, with_pendulum)
         fitted = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()]
         curves.append(FitCurve(b.log.source or "log", b.log.t[: b.used], b.log.V[: b.used], b.log.x[: b.used], fitted, simulated))
+        forward_errors.append(simulated - b.log.x[: b.used])
+    forward = np.concatenate(forward_errors)
+    forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
+    forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
+    progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
+
     return FitResult(
         names=names,
         values=values,
@@ -420,6 +471,10 @@ def fit_parameters(
         status=str(stats.get("return_status", "unknown")),
         seconds=time.perf_counter() - t_start,
         curves=tuple(curves),
+        forward_rms=forward_rms,
+        forward_max=forward_max,
+        encoder_step=float(params0.q_x),
+        travel=max(float(np.ptp(b.log.x[: b.used])) for b in blocks),
     )
 
 
@@ -481,6 +536,31 @@ def _uncertainty(problem, r: np.ndarray, J: ca.DM) -> np.ndarray:
     except RuntimeError:  # singular: a parameter the logs cannot show, and no prior
         return np.full(nt, np.inf)
     return np.sqrt(np.clip(np.diag(solved[:nt, :nt]) * sigma2, 0, None))
+
+
+def _forward_simulation(block, params: PlantParameters, nodes: np.ndarray, with_pendulum: bool) -> np.ndarray:
+    """Positions of the plant under the true (switching) stick-slip law replaying a log's voltage.
+
+    The cart alone (and a hanging pendulum) is simulated over the whole log from the fit's first
+    state. An upright pendulum is open-loop unstable, so a replay of its voltage diverges whatever
+    the parameters: there the simulation restarts from the fit's state estimate (its shooting node)
+    every :data:`FORWARD_WINDOW_UNSTABLE` seconds.
+    """
+    log, ns = block.log, nodes.shape[0]
+    upright = with_pendulum and log.alpha is not None and float(np.median(np.abs(log.alpha))) < math.pi / 2
+    if not upright:
+        x0_state = np.r_[nodes[:, 0], np.zeros(4 - ns)]
+        return _simulate_plant(log, params, x0_state)[: block.used]
+    from pendulab.calibration._simulation import simulate
+
+    per_window = max(1, int(round(FORWARD_WINDOW_UNSTABLE / (block.M * log.period))))
+    out = np.empty(block.used)
+    out[0] = nodes[0, 0]
+    for k in range(0, block.N, per_window):
+        a, b = k * block.M, min((k + per_window) * block.M, block.used - 1)
+        states = simulate(params, log.V[a:b], log.period, nodes[:, k], t0=float(log.t[a]))
+        out[a + 1 : b + 1] = states[1:, 0]
+    return out
 
 
 def _simulate_plant(log: RampLog, params: PlantParameters, x0: np.ndarray) -> np.ndarray:

@@ -411,7 +411,8 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     x = np.interp(t, data["x"][:, 0], data["x"][:, 1])
     alpha = np.interp(t, data["alpha"][:, 0], data["alpha"][:, 1])
     tv, vv = data["voltage"][:, 0], data["voltage"][:, 1]
-    voltage = vv[np.clip(np.searchsorted(tv, t, side="right") - 1, 0, len(vv) - 1)]
+    # Held from each logged time on; a rounding error of the new time base must not pick the sample before.
+    voltage = vv[np.clip(np.searchsorted(tv, t + 1e-6 * period, side="right") - 1, 0, len(vv) - 1)]
     if np.max(np.abs(x)) > 1.5:
         x = x * 1e-3
     if np.max(np.abs(alpha)) > 2 * np.pi + 0.5:

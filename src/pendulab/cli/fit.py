@@ -6,7 +6,7 @@ import argparse
 import datetime as _dt
 from pathlib import Path
 
-from pendulab.errors import CalibrationError
+from pendulab.errors import CalibrationError, FitRejected
 from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
 
 
@@ -17,10 +17,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Replay the logged voltage through the CasADi plant (smoothed friction) and fit the friction vector, "
             "Beq and the force gain (optionally M_cart) to the logged positions by multiple shooting. "
-            "Logs: CSV with columns t, V, x (alpha optional), or the run.csv / run.mat of 'pendulab simulate'."
+            "Logs: CSV with columns t, V, x (alpha optional), the run.csv / run.mat of 'pendulab simulate', or a folder "
+            "of the old MATLAB lab's logs (one .mat per signal). The answer is checked by a forward simulation of the "
+            "whole log under the true stick-slip law; exit status 3 when it misses by far more than the encoder step "
+            "or the logs cannot identify the parameters (e.g. a constant voltage), and no calibration is written."
         ),
     )
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="log files (CSV or run.mat)")
+    parser.add_argument("logs", nargs="+", metavar="LOG", help="log files (CSV or run.mat) or old-lab log folders")
     parser.add_argument("--pendulum", default="none", choices=("long", "short", "none"), help="configuration the logs were taken in (default none: ramp tests)")
     parser.add_argument("--cart", default="ip02", choices=CARTS, help="cart (default ip02, no load)")
     parser.add_argument("--calibration", metavar="FILE", help="start from this calibration instead of the lab defaults")
@@ -84,6 +87,16 @@ def run(args: argparse.Namespace) -> int:
     print(result.summary())
     if not result.success:
         print(f"warning: IPOPT did not converge ({result.status}); the values above are its last iterate")
+    if not result.forward_ok:
+        if plot:  # the picture of the mismatch helps to see why; no calibration is written
+            plot_fit(result, plot)
+            print(f"plot written to {plot}")
+        raise FitRejected(
+            f"the fitted values do not reproduce the logs: a forward simulation misses them by {result.forward_rms * 1e3:.3g} mm RMS "
+            f"({result.forward_rms / max(result.encoder_step, 1e-12):.0f} encoder steps; accepted up to {result.forward_limit * 1e3:.3g} mm); "
+            "no calibration written. Check the logs (units, --pendulum, the voltage column is the applied voltage), "
+            "give longer or richer logs (ramps in both directions, steps), or start from --calibration"
+        )
 
     if out:
         metadata = {
