@@ -1,0 +1,57 @@
+#!/usr/bin/env python3
+"""How the fit does on logs of shapes its own code never generates (issue 8, must-show 1).
+
+Shapes (``tests/fit_logs.py``): slow ramps with rests, fast steps, a sine sweep; the plant under the
+true stick-slip law with parameters the defaults have never seen, 10 um position noise, the encoder's
+quantization and optionally voltage noise. Each is fitted as ``pendulab fit LOG`` does (ramp-test
+start where one is found, else the defaults) and the recovered values, their errors, the fit's time
+and its forward check are printed, beside the forward check of the true values on the same log.
+
+Usage::
+
+    python bench/fit_shapes.py [--duration 20] [--voltage-noise 0.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=20.0)
+    parser.add_argument("--voltage-noise", type=float, default=0.0)
+    args = parser.parse_args()
+
+    import numpy as np
+    from fit_logs import TRUE, synthetic_log
+
+    from pendulab.calibration._simulation import simulate
+    from pendulab.calibration.fit import fit_parameters, ramp_start
+    from pendulab.model.parameters import PlantParameters
+
+    for shape in ("ramps with rests", "fast steps", "sine sweep"):
+        log = synthetic_log(shape, duration=args.duration, voltage_noise=args.voltage_noise)
+        x_true = simulate(TRUE, log.V[:-1], log.period, (log.x[0], 0, 0, 0))[:, 0]
+        true_rms = float(np.sqrt(np.mean((x_true - log.x) ** 2)))
+        t0 = time.perf_counter()
+        start, note = ramp_start([log], PlantParameters.preset("none"))
+        result = fit_parameters([log], start)
+        seconds = time.perf_counter() - t0
+        errors = "  ".join(f"{n} {100 * (result.values[n] / getattr(TRUE, n) - 1):+.1f}%" for n in result.names)
+        print(f"{shape} ({log.duration:.0f} s, travel {np.ptp(log.x) * 1e3:.0f} mm): {seconds:.1f} s, {result.status}; {note}")
+        print(f"    {errors}")
+        print(
+            f"    forward RMS: fitted {result.forward_rms * 1e6:.0f} um (max {result.forward_max * 1e6:.0f}), true values "
+            f"{true_rms * 1e6:.0f} um, limit {result.forward_limit * 1e6:.0f} um -> {'accepted' if result.forward_ok else 'rejected (exit 3)'}"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
