@@ -46,7 +46,7 @@ def twin_run(tmp_path_factory):
         key("s")
         try:
             emu.wait_for("hand released", timeout=30)
-            time.sleep(11.0)
+            time.sleep(13.0)  # wall time; a loaded machine slows the twin's AVR clock a little
         except AssertionError:
             pass  # lab ended early or the twin did not get there: the checks below show which
         key("e")

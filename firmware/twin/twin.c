@@ -121,11 +121,20 @@ static void hand(double t, double *s) {
         s[1] = 0;
     }
     if (raising) {
-        double f = (t - raise_at) / RAISE_TIME;
-        if (f > 1) f = 1;
-        double g = 0.5 - 0.5 * cos(M_PI * f);
-        s[2] = M_PI + (HOLD_ANGLE - M_PI) * g;
-        s[3] = (HOLD_ANGLE - M_PI) * 0.5 * M_PI * sin(M_PI * f) / RAISE_TIME;
+        /* Up to 2.5 deg from upright (outside the controller's +-2 deg capture window) along a smooth path,
+         * then placed at HOLD_ANGLE in the last 2 ms: the controller can only take a pendulum at rest. */
+        const double outside = 2.5 * M_PI / 180.0, place = 0.002;
+        double span = RAISE_TIME - place, u = t - raise_at;
+        if (u < span) {
+            double f = u / span, g = 0.5 - 0.5 * cos(M_PI * f);
+            s[2] = M_PI + (outside - M_PI) * g;
+            s[3] = (outside - M_PI) * 0.5 * M_PI * sin(M_PI * f) / span;
+        } else {
+            double f = (u - span) / place;
+            if (f > 1) f = 1;
+            s[2] = outside + (HOLD_ANGLE - outside) * f;
+            s[3] = f < 1 ? (HOLD_ANGLE - outside) / place : 0;
+        }
     } else if (held) {
         s[2] = HOLD_ANGLE;
         s[3] = 0;
