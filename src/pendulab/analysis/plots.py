@@ -237,7 +237,7 @@ def _voltage_panel(limit: float) -> _Panel:
                         label = None
                 worst = finite[np.argmax(np.abs(finite))]
                 first = float(t[np.argmax(beyond)])
-                ax.text(0.99, 0.04, f"command runs away from t = {first:.3g} s, to {worst:.3g} V",
+                ax.text(0.99, 0.04, f"command beyond the range (first at t = {first:.3g} s), extreme {worst:.3g} V",
                         transform=ax.transAxes, ha="right", va="bottom", fontsize="small",
                         bbox=dict(boxstyle="round", fc="white", ec="0.6", alpha=0.9))
             drawn = True
