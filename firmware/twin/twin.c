@@ -581,6 +581,14 @@ static void on_signal(int sig) {
     exit(0);
 }
 
+static void simavr_log(avr_t *a, const int level, const char *fmt, va_list ap) {
+    /* simavr's messages go to stderr: stdout carries the port alone, and nobody reads it after that
+     * (a full pipe would stop the simulation). */
+    if (level > (a ? a->log : LOG_ERROR)) return;
+    fprintf(stderr, "[simavr] ");
+    vfprintf(stderr, fmt, ap);
+}
+
 static void no_sleep(avr_t *a, avr_cycle_count_t how_long) {
     (void)a;
     (void)how_long;
@@ -652,6 +660,7 @@ int main(int argc, char **argv) {
     params[P_q_alpha] = 0.0;        /* quantization happens in the encoders */
     params[P_q_x] = 0.0;
 
+    avr_global_logger_set(simavr_log);
     avr = avr_make_mcu_by_name("atmega2560");
     if (!avr) usage("simavr has no atmega2560");
     avr_init(avr);
@@ -760,7 +769,8 @@ int main(int argc, char **argv) {
             reset_seen = 0;
             depth = 0;
             no_level_polling();
-            say("firmware reset (%s); motor off", hung ? "hardware watchdog" : "reset");
+            /* MCUSR (0x54) tells the firmware, and us, what reset it: WDRF is bit 3. */
+            say("firmware reset (%s); motor off", (avr->data[0x54] & 0x08) ? "hardware watchdog" : "external reset");
             if (trace) fprintf(trace, "reset,%llu\n", (unsigned long long)avr->cycle);
             hung = 0;
             amp_enabled = 0;
