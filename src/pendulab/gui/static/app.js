@@ -145,7 +145,7 @@ const updateLinear = debounce(async () => {
   traces.push({ x: answer.closed_poles.re, y: answer.closed_poles.im, mode: "markers", marker: { symbol: "square", size: 9, color: answer.stable ? "#ff7f0e" : "#d62728", line: { color: "#000", width: 1 } }, name: "closed-loop poles" });
   const [lo, hi, half] = answer.view;
   Plotly.react("rootlocus", traces, {
-    title: { text: "root locus of Lp·C(s)·G(s)", font: { size: 13 } }, margin: { t: 30, r: 10, b: 40, l: 50 },
+    title: { text: "root locus of Lp·C(s)·G(s)", font: { size: 13 }, x: 0.01, xanchor: "left" }, margin: { t: 30, r: 10, b: 40, l: 50 },
     xaxis: { title: { text: "σ (1/s)" }, range: [lo, hi], zeroline: true }, yaxis: { title: { text: "ω (rad/s)" }, range: [-half, half] },
     legend: { font: { size: 10 } },
   }, { responsive: true, displaylogo: false });
@@ -158,7 +158,7 @@ const updateLinear = debounce(async () => {
     { x: b.omega, y: b.mag_db, name: "|L| (dB)", line: { color: "#1f77b4" } },
     { x: b.omega, y: b.phase_deg, name: "phase (°)", yaxis: "y2", line: { color: "#ff7f0e" } },
   ], {
-    title: { text: "Bode plot of the loop", font: { size: 13 } }, margin: { t: 30, r: 10, b: 40, l: 50 }, showlegend: false,
+    title: { text: "Bode plot of the loop", font: { size: 13 }, x: 0.01, xanchor: "left" }, margin: { t: 30, r: 10, b: 40, l: 50 }, showlegend: false,
     grid: { rows: 2, columns: 1 },
     xaxis: { type: "log", title: { text: "ω (rad/s)" } },
     yaxis: { title: { text: "dB" }, domain: [0.55, 1] }, yaxis2: { title: { text: "deg" }, domain: [0, 0.45], anchor: "x" },
@@ -278,7 +278,7 @@ async function drawResults() {
         line: { color: run.color, width: 1.3 }, xaxis: "x", yaxis: k === 0 ? "y" : `y${k + 1}` });
     });
   });
-  const layout = { margin: { t: 30, r: 10, b: 40, l: 60 }, title: { text: "response (time from the poke)", font: { size: 13 } },
+  const layout = { margin: { t: 30, r: 10, b: 40, l: 60 }, title: { text: "response (time from the poke)", font: { size: 13 }, x: 0.01, xanchor: "left" },
     grid: { rows: 4, columns: 1, shared_xaxes: true }, legend: { orientation: "h", y: -0.08 }, xaxis: { title: { text: "t − t_poke (s)" } } };
   panels.forEach(([, title], k) => {
     layout[k === 0 ? "yaxis" : `yaxis${k + 1}`] = { title: { text: title }, domain: [1 - (k + 1) * 0.25 + 0.03, 1 - k * 0.25] };
@@ -288,7 +288,7 @@ async function drawResults() {
     x: run.data.columns.t.map((v) => v - run.data.poke_start), y: run.data.columns.alpha.map((v) => v * 180 / Math.PI),
     name: run.data.label, line: { color: run.color },
   }));
-  Plotly.react("zoom", zoom, { title: { text: "angle at the poke (zoom)", font: { size: 13 } }, margin: { t: 30, r: 10, b: 40, l: 50 },
+  Plotly.react("zoom", zoom, { title: { text: "angle at the poke (zoom)", font: { size: 13 }, x: 0.01, xanchor: "left" }, margin: { t: 30, r: 10, b: 40, l: 50 },
     showlegend: false, xaxis: { range: [-0.2, 2.0], title: { text: "t − t_poke (s)" } }, yaxis: { title: { text: "angle (°)" } } },
   { responsive: true, displaylogo: false });
 }
