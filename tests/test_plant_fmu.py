@@ -149,7 +149,8 @@ def test_parameters_are_used(plant_unzipdir: Path) -> None:
 
 
 # ---------------------------------------------------------------- Model Exchange
-SMOOTH = {"F1": 0.0, "F2": 0.0, "poke_magnitude": 0.0}  # friction off and no poke: a smooth right-hand side
+# Friction off, no poke, no end stop within reach: a smooth right-hand side.
+SMOOTH = {"F1": 0.0, "F2": 0.0, "poke_magnitude": 0.0, "track_half_length": 1e4}
 
 
 def model_exchange(plant_fmu: Path, start: Mapping[str, float], stop: float, rtol: float = 1e-8) -> np.ndarray:
@@ -214,11 +215,16 @@ def test_model_exchange_derivatives_equal_the_casadi_ode(plant_unzipdir: Path) -
         p = PlantParameters().as_vector()
         rng = np.random.default_rng(2)
         for _ in range(50):
-            state = rng.normal(size=4) * [0.2, 0.3, 2.0, 3.0]
+            state = rng.normal(size=4) * [0.1, 0.3, 2.0, 3.0]  # inside the end stops
             t, V = float(rng.uniform(0, 2)), float(rng.uniform(-15, 15))
             fmu.setTime(t)
             fmu.setReal([vr["V"]], [V])
             fmu.setContinuousStates((c_double * 4)(*state), 4)
+            # The switches are a discrete state that changes only at events (issue 12): an event here
+            # lets the FMU pick the regime the law gives at this state.
+            fmu.enterEventMode()
+            fmu.newDiscreteStates()
+            fmu.enterContinuousTimeMode()
             derivatives = (c_double * 4)()
             fmu.getDerivatives(derivatives, 4)
             got = np.array(derivatives)

@@ -19,7 +19,7 @@ from fmpy.fmi2 import FMU2Slave
 from pendulab.model.parameters import PlantParameters
 
 SIGNALS = ("x", "xdot", "alpha", "alphadot", "alpha_measured", "x_measured", "V_applied", "F_friction")
-NO_POKE = {"poke_magnitude": 0.0}
+UNDISTURBED = {"poke_magnitude": 0.0, "track_half_length": 1e4}  # no poke, and no end stop within reach
 FRICTION_OFF = {"F1": 0.0, "F2": 0.0}
 
 
@@ -71,7 +71,7 @@ def test_small_swings_with_a_free_cart(plant_unzipdir: Path) -> None:
     ``w^2 = Mp g lp (Mc+Mp) / ((Mc+Mp) Ip + Mc Mp lp^2)``. The cart swings against the pendulum, so the
     period is shorter than with a fixed pivot. (Amplitude correction for 0.05 rad: ~1.6e-4, negligible.)
     """
-    p = PlantParameters.preset("long", Beq=0.0, Km=0.0, Bp=0.0, **FRICTION_OFF, **NO_POKE)
+    p = PlantParameters.preset("long", Beq=0.0, Km=0.0, Bp=0.0, **FRICTION_OFF, **UNDISTURBED)
     Mc, Mp, lp, Ip = p.lumped_cart_mass, p.Mp, p.lp, p.Ip
     w = math.sqrt(Mp * p.g * lp * (Mc + Mp) / ((Mc + Mp) * Ip + Mc * Mp * lp**2))
     run = simulate(plant_unzipdir, p, 0.0, stop=8.0, start={"alpha": math.pi + 0.05})
@@ -90,7 +90,7 @@ def test_small_swings_with_a_held_cart(plant_unzipdir: Path) -> None:
     (The stick-slip friction does not hold the cart: it only cancels the motor force, not the pendulum's
     reaction, so it is not used for this check.)
     """
-    p = PlantParameters.preset("long", Beq=1000.0, Bp=0.0, **FRICTION_OFF, **NO_POKE)
+    p = PlantParameters.preset("long", Beq=1000.0, Bp=0.0, **FRICTION_OFF, **UNDISTURBED)
     w = math.sqrt(p.Mp * p.g * p.lp / (p.Ip + p.Mp * p.lp**2))
     run = simulate(plant_unzipdir, p, 0.0, stop=8.0, start={"alpha": math.pi + 0.05})
     assert period(run["t"], run["alpha"] - math.pi) == pytest.approx(2 * math.pi / w, rel=0.01)
@@ -99,7 +99,7 @@ def test_small_swings_with_a_held_cart(plant_unzipdir: Path) -> None:
 
 def test_free_swing_decay_from_pivot_damping(plant_unzipdir: Path) -> None:
     """With pivot damping Bp the free-cart swing decays as exp(-s t), ``s = (Mc+Mp) Bp / (2 D0)``."""
-    p = PlantParameters.preset("long", Beq=0.0, Km=0.0, Bp=0.01, **FRICTION_OFF, **NO_POKE)
+    p = PlantParameters.preset("long", Beq=0.0, Km=0.0, Bp=0.01, **FRICTION_OFF, **UNDISTURBED)
     Mc = p.lumped_cart_mass
     D0 = (Mc + p.Mp) * p.Ip + Mc * p.Mp * p.lp**2
     sigma = (Mc + p.Mp) * p.Bp / (2 * D0)
@@ -116,7 +116,7 @@ def test_free_swing_decay_from_pivot_damping(plant_unzipdir: Path) -> None:
 
 def test_lab_cart_swing_lies_between_free_and_held(plant_unzipdir: Path) -> None:
     """With the lab's Beq, back-EMF and friction the cart is neither free nor held: the period is in between."""
-    p = PlantParameters.preset("long", **NO_POKE)
+    p = PlantParameters.preset("long", **UNDISTURBED)
     Mc, Mp, lp, Ip = p.lumped_cart_mass, p.Mp, p.lp, p.Ip
     free = 2 * math.pi / math.sqrt(Mp * p.g * lp * (Mc + Mp) / ((Mc + Mp) * Ip + Mc * Mp * lp**2))
     held = 2 * math.pi / math.sqrt(Mp * p.g * lp / (Ip + Mp * lp**2))
@@ -134,7 +134,7 @@ def breakaway_voltage(p: PlantParameters) -> float:
 def test_cart_sticks_below_the_breakaway_force_and_moves_above(plant_unzipdir: Path, sign: float) -> None:
     """Just above breakaway the cart creeps: as it speeds up, the back-EMF lowers the motor force until it
     falls back to F1 and the cart re-sticks, so it crawls at ``v* = (k V - F1) / (k Km Kg / r_mp)`` (< v1)."""
-    p = PlantParameters.preset("long", **NO_POKE)
+    p = PlantParameters.preset("long", **UNDISTURBED)
     k = motor_force_per_volt(p)
     V_break = breakaway_voltage(p)  # 0.869 V for the lab's F1 = 1.5 N
     below = simulate(plant_unzipdir, p, sign * 0.98 * V_break, stop=1.0, start={"alpha": math.pi})
@@ -154,7 +154,7 @@ def test_cart_sticks_below_the_breakaway_force_and_moves_above(plant_unzipdir: P
 
 def test_breakaway_follows_the_friction_vector(plant_unzipdir: Path) -> None:
     """Raising F1 raises the breakaway voltage in proportion."""
-    p = PlantParameters.preset("none", F1=2.5, F2=4.0, **NO_POKE)
+    p = PlantParameters.preset("none", F1=2.5, F2=4.0, **UNDISTURBED)
     V_break = breakaway_voltage(p)
     assert simulate(plant_unzipdir, p, 0.98 * V_break, stop=0.5)["x"][-1] == 0.0
     assert simulate(plant_unzipdir, p, 1.02 * V_break, stop=0.5)["x"][-1] > 0.005
@@ -162,7 +162,7 @@ def test_breakaway_follows_the_friction_vector(plant_unzipdir: Path) -> None:
 
 def test_slip_region_drags_with_B(plant_unzipdir: Path) -> None:
     """Between F1 and F2 at low speed the drag is -B xdot: the cart creeps at k V / (B + Beq + k Km Kg / r_mp)."""
-    p = PlantParameters.preset("none", F1=0.5, v1=1e-4, F2=3.0, v2=0.5, B=20.0, **NO_POKE)
+    p = PlantParameters.preset("none", F1=0.5, v1=1e-4, F2=3.0, v2=0.5, B=20.0, **UNDISTURBED)
     k = motor_force_per_volt(p)
     V = 1.0  # k V = 1.73 N: between F1 and F2
     creep = k * V / (p.B + p.Beq + k * p.Km * p.Kg / p.r_mp)  # 0.054 m/s < v2
@@ -173,7 +173,7 @@ def test_slip_region_drags_with_B(plant_unzipdir: Path) -> None:
 
 # ---------------------------------------------------------------- amplifier and motor
 def test_voltage_saturation(plant_unzipdir: Path) -> None:
-    p = PlantParameters.preset("long", **NO_POKE)
+    p = PlantParameters.preset("long", **UNDISTURBED)
     start = {"alpha": math.pi + 0.1}
     for command, limit in ((100.0, 10.0), (-100.0, -10.0)):
         big = simulate(plant_unzipdir, p, command, stop=0.5, start=start)
@@ -203,7 +203,7 @@ def test_back_emf_terminal_speed_and_time_constant(plant_unzipdir: Path, overrid
     ``v_terminal = F_stall / (Beq + force_gain eta_g eta_m Kt Km Kg^2 / (Rm r_mp^2))``, ``F_stall = k V``,
     reached with the time constant ``Mc / (Beq + ...)`` where Mc includes the rotor inertia.
     """
-    p = PlantParameters.preset("none", **FRICTION_OFF, **NO_POKE, **overrides)
+    p = PlantParameters.preset("none", **FRICTION_OFF, **UNDISTURBED, **overrides)
     V = 5.0
     damping = p.Beq + p.force_gain * p.eta_g * p.eta_m * p.Kt * p.Km * p.Kg**2 / (p.Rm * p.r_mp**2)
     v_terminal = motor_force_per_volt(p) * V / damping
@@ -212,14 +212,14 @@ def test_back_emf_terminal_speed_and_time_constant(plant_unzipdir: Path, overrid
     assert run["xdot"][-1] == pytest.approx(v_terminal, rel=0.005)
     assert run["xdot"][50] == pytest.approx(v_terminal * (1 - math.exp(-1)), rel=0.005)
     # With the pendulum hanging still, the same cart reaches the same speed (the bob rides along).
-    hanging = simulate(plant_unzipdir, PlantParameters.preset("long", **FRICTION_OFF, **NO_POKE, **overrides), V,
+    hanging = simulate(plant_unzipdir, PlantParameters.preset("long", **FRICTION_OFF, **UNDISTURBED, **overrides), V,
                        stop=30 * tau + 20, step=0.05, start={"alpha": math.pi})
     assert hanging["xdot"][-1] == pytest.approx(v_terminal, rel=0.005)
 
 
 def test_terminal_speed_with_the_lab_friction(plant_unzipdir: Path) -> None:
     """At 5 V the cart runs faster than v2 and pushes harder than F2, so friction is zero and the speed is as without it."""
-    p = PlantParameters.preset("none", **NO_POKE)
+    p = PlantParameters.preset("none", **UNDISTURBED)
     damping = p.Beq + p.eta_g * p.eta_m * p.Kt * p.Km * p.Kg**2 / (p.Rm * p.r_mp**2)
     run = simulate(plant_unzipdir, p, 5.0, stop=1.5)
     assert run["xdot"][-1] == pytest.approx(motor_force_per_volt(p) * 5.0 / damping, rel=0.005)
@@ -229,7 +229,7 @@ def test_terminal_speed_with_the_lab_friction(plant_unzipdir: Path) -> None:
 def test_current_limit_caps_the_force(plant_unzipdir: Path) -> None:
     """I_max = 1 A, V = 10 V: the current stays clamped (10 V minus the back-EMF still exceeds Rm I_max),
     so the force is ``F_max = force_gain eta_g Kg eta_m Kt I_max / r_mp`` and the terminal speed F_max / Beq."""
-    p = PlantParameters.preset("none", I_max=1.0, **FRICTION_OFF, **NO_POKE)
+    p = PlantParameters.preset("none", I_max=1.0, **FRICTION_OFF, **UNDISTURBED)
     F_max = p.force_gain * p.eta_g * p.Kg * p.eta_m * p.Kt * p.I_max / p.r_mp
     v = F_max / p.Beq
     assert (10.0 - p.Km * p.Kg * v / p.r_mp) / p.Rm > p.I_max, "the clamp is active at terminal speed"
@@ -261,7 +261,7 @@ def test_quantization_rounds_half_away_from_zero(plant_unzipdir: Path) -> None:
 
 
 def test_quantization_off_reads_the_true_values(plant_unzipdir: Path) -> None:
-    p = PlantParameters.preset("long", q_alpha=0.0, q_x=0.0, **NO_POKE)
+    p = PlantParameters.preset("long", q_alpha=0.0, q_x=0.0, **UNDISTURBED)
     run = simulate(plant_unzipdir, p, 3.0, stop=1.0, step=0.001, start={"alpha": math.pi + 0.3})
     np.testing.assert_array_equal(run["alpha_measured"], run["alpha"])
     np.testing.assert_array_equal(run["x_measured"], run["x"])

@@ -79,6 +79,10 @@ class ModelSpec:
     generated: dict[str, str] = field(default_factory=dict)
     defines: dict[str, str] = field(default_factory=dict)
     default_step: float = 1e-3
+    #: Number of event indicators (Model Exchange); the model implements model_get_event_indicators.
+    event_indicators: int = 0
+    #: canHandleVariableCommunicationStepSize: False if doStep accepts only ``default_step``.
+    variable_step: bool = True
 
     @property
     def model_exchange(self) -> bool:
@@ -130,7 +134,7 @@ def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
         f"  description={quoteattr(spec.description)}",
         f'  generationTool="{GENERATOR}"',
         '  variableNamingConvention="structured"',
-        '  numberOfEventIndicators="0">',
+        f'  numberOfEventIndicators="{spec.event_indicators}">',
     ]
     if spec.model_exchange:
         lines.append(
@@ -138,7 +142,7 @@ def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
             f"\n    <SourceFiles>{files}\n    </SourceFiles>\n  </ModelExchange>"
         )
     lines.append(
-        f'  <CoSimulation modelIdentifier="{spec.identifier}" canHandleVariableCommunicationStepSize="true"'
+        f'  <CoSimulation modelIdentifier="{spec.identifier}" canHandleVariableCommunicationStepSize="{_literal(spec.variable_step)}"'
         f' canNotUseMemoryManagementFunctions="true">'
         f"\n    <SourceFiles>{files}\n    </SourceFiles>\n  </CoSimulation>"
     )
@@ -212,6 +216,7 @@ def variables_header(spec: ModelSpec) -> str:
         f'#define MODEL_NAME "{spec.identifier}"',
         f'#define MODEL_GUID "{spec.guid}"',
         f"#define N_STATES {len(spec.states)}",
+        f"#define N_EVENT_INDICATORS {spec.event_indicators}",
     ]
     for base in ("Real", "Integer", "Boolean"):
         out.append(f"#define N_{base.upper()}S {spec.count(base)}")

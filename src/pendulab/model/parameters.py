@@ -77,6 +77,10 @@ class PlantParameters:
     poke_magnitude: float = _p(50.0, "rad/s2", "Poke magnitude", minimum=-math.inf)
     poke_duration: float = _p(0.005, "s", "Poke duration")
     poke_start: float = _p(1.0, "s", "Poke start time")
+    # track: the cart stops dead at the end stops (appended last: earlier value references stay stable)
+    track_half_length: float = _p(
+        0.407, "m", "End stops: the cart stops dead at +/- this position (IP02: 0.814 m cart travel)", positive=True
+    )
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -64,6 +64,54 @@ def mean_poke_acceleration(p: dict[str, ca.SX], t: ca.SX, h: ca.SX) -> ca.SX:
     return p["poke_magnitude"] * overlap / h
 
 
+#: Discrete state of the Model Exchange plant (each changes only at events), in order.
+REGIME = ("friction", "current", "stop", "count_alpha", "count_x")
+#: Friction regimes (``REGIME[0]``). The two sliding regimes hold the speed on the surface |xdot| = v1
+#: (between stick and slip) or |xdot| = v2 (between slip and free) where both sides push the cart onto
+#: it: the Filippov solution that Co-Simulation's fixed step approximates by chattering.
+FREE, SLIP, STICK, SLIDE_V1, SLIDE_V2 = 0.0, 1.0, 2.0, 3.0, 4.0
+#: How close |xdot| must be to v1 or v2 for an event to count as on that surface (m/s).
+SURFACE_TOLERANCE = 1e-9
+#: The event indicators (zero crossings) of the Model Exchange plant, in order.
+EVENT_INDICATORS = (
+    "stick_speed", "stick_force", "slip_speed", "slip_force",
+    "current_upper", "current_lower", "voltage_upper", "voltage_lower",
+    "stop_upper", "stop_lower",
+)
+# The encoder steps are not event indicators: they switch no term of the right-hand side, and a CVode
+# restart at every count (thousands per swing) cost more accuracy than it gave (1e-4 rad/s at rtol 1e-8).
+
+
+def _amplifier(V: ca.SX, xdot: ca.SX, p: dict[str, ca.SX], current_mode: ca.SX | None) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """Voltage saturation, then the optional current limit on (V - back-EMF)/Rm.
+
+    ``current_mode`` (-1, 0, +1) freezes the limit's branch (Model Exchange between events); None decides
+    it from the current itself. Returns ``V_applied, raw current, current, F_motor``.
+    """
+    V_applied = ca.fmin(ca.fmax(V, -p["V_max"]), p["V_max"])
+    omega_m = p["Kg"] * xdot / p["r_mp"]
+    raw = (V_applied - p["Km"] * omega_m) / p["Rm"]
+    if current_mode is None:
+        current = ca.if_else(p["I_max"] > 0, ca.fmin(ca.fmax(raw, -p["I_max"]), p["I_max"]), raw)
+    else:
+        current = ca.if_else(current_mode > 0.5, p["I_max"], ca.if_else(current_mode < -0.5, -p["I_max"], raw))
+    F_motor = p["force_gain"] * p["eta_g"] * p["Kg"] * p["eta_m"] * p["Kt"] * current / p["r_mp"]
+    return V_applied, raw, current, F_motor
+
+
+def _current_mode(raw: ca.SX, p: dict[str, ca.SX]) -> ca.SX:
+    """Branch of the current limit the law picks: +1 above I_max, -1 below -I_max, else 0."""
+    limited = p["I_max"] > 0
+    return ca.if_else(ca.logic_and(limited, raw > p["I_max"]), 1.0, ca.if_else(ca.logic_and(limited, raw < -p["I_max"]), -1.0, 0.0))
+
+
+def _friction_regime(xdot: ca.SX, F_motor: ca.SX, p: dict[str, ca.SX]) -> ca.SX:
+    """The lab's stick-slip law: stick below v1 and F1, strong viscous slip below v2 and F2, else free."""
+    sticks = ca.logic_and(ca.fabs(xdot) < p["v1"], ca.fabs(F_motor) < p["F1"])
+    slips = ca.logic_and(ca.fabs(xdot) < p["v2"], ca.fabs(F_motor) < p["F2"])
+    return ca.if_else(sticks, STICK, ca.if_else(slips, SLIP, FREE))
+
+
 def plant_equations(
     state: ca.SX,
     V: ca.SX,
@@ -72,6 +120,7 @@ def plant_equations(
     *,
     smooth_friction: bool = False,
     poke: ca.SX | None = None,
+    regime: ca.SX | None = None,
 ) -> tuple[ca.SX, dict[str, ca.SX]]:
     """The right-hand side of SPEC §2 and the intermediate signals.
 
@@ -89,21 +138,21 @@ def plant_equations(
         Replace the stick-slip switches by steep sigmoids so that the model is differentiable.
     poke : SX, optional
         The poke's angular acceleration; default :func:`poke_acceleration` at ``t``.
+    regime : SX (5,), optional
+        The discrete state of :data:`REGIME`: friction regime, current-limit branch and end stop held
+        fixed (Model Exchange between events, where the right-hand side must be smooth). None: the
+        switches are decided at every evaluation from the state (Co-Simulation's fixed-step law).
 
     Returns
     -------
     derivative : SX (4,)
     signals : dict
-        ``V_applied``, ``current``, ``F_motor``, ``F_friction``.
+        ``V_applied``, ``current``, ``current_raw``, ``F_motor``, ``F_friction``, ``xddot_free`` (the
+        cart's acceleration if no end stop held it).
     """
-    xdot, alpha, alphadot = state[1], state[2], state[3]  # the position x enters no force
+    x, xdot, alpha, alphadot = state[0], state[1], state[2], state[3]
 
-    # Amplifier: voltage saturation, then the optional current limit on (V - back-EMF)/Rm.
-    V_applied = ca.fmin(ca.fmax(V, -p["V_max"]), p["V_max"])
-    omega_m = p["Kg"] * xdot / p["r_mp"]
-    current = (V_applied - p["Km"] * omega_m) / p["Rm"]
-    current = ca.if_else(p["I_max"] > 0, ca.fmin(ca.fmax(current, -p["I_max"]), p["I_max"]), current)
-    F_motor = p["force_gain"] * p["eta_g"] * p["Kg"] * p["eta_m"] * p["Kt"] * current / p["r_mp"]
+    V_applied, raw, current, F_motor = _amplifier(V, xdot, p, None if regime is None else regime[1])
 
     # Stick-slip friction (the lab's calibrated model).
     if smooth_friction:
@@ -112,26 +161,33 @@ def plant_equations(
         stick = _smooth_step(p["v1"] - speed, 2e-3) * _smooth_step(p["F1"] - force, 0.05)
         slip = _smooth_step(p["v2"] - speed, 5e-3) * _smooth_step(p["F2"] - force, 0.05)
         F_friction = -stick * F_motor - (1 - stick) * slip * p["B"] * xdot
-    else:
-        sticks = ca.logic_and(ca.fabs(xdot) < p["v1"], ca.fabs(F_motor) < p["F1"])
-        slips = ca.logic_and(ca.fabs(xdot) < p["v2"], ca.fabs(F_motor) < p["F2"])
-        F_friction = ca.if_else(sticks, -F_motor, ca.if_else(slips, -p["B"] * xdot, 0.0))
-    F = F_motor + F_friction
-
     Mc = p["M_cart"] + p["eta_g"] * p["Kg"] ** 2 * p["Jm"] / p["r_mp"] ** 2
     Mp, lp, Ip = p["Mp"], p["lp"], p["Ip"]
+    J = Ip + Mp * lp**2
+    has_pendulum = J > 0
+    gravity_torque = Mp * p["g"] * lp * ca.sin(alpha) - p["Bp"] * alphadot
+    if smooth_friction:
+        pass
+    else:
+        # The friction force that makes xddot = 0 (a sliding regime holds the speed on its surface).
+        base = F_motor - p["Beq"] * xdot - Mp * lp * ca.sin(alpha) * alphadot**2
+        F_hold = ca.if_else(has_pendulum, -(base + Mp * lp * ca.cos(alpha) * gravity_torque / ca.if_else(has_pendulum, J, 1.0)), -base)
+        friction = _friction_regime(xdot, F_motor, p) if regime is None else regime[0]
+        F_friction = ca.if_else(friction > 1.5, -F_motor, ca.if_else(friction > 0.5, -p["B"] * xdot, 0.0))
+        if regime is not None:  # the sliding regimes exist only as Model Exchange's discrete state
+            F_friction = ca.if_else(friction > 2.5, F_hold, F_friction)
+    F = F_motor + F_friction
+
     if poke is None:
         poke = poke_acceleration(p, t)
 
     cart_force = F - p["Beq"] * xdot - Mp * lp * ca.sin(alpha) * alphadot**2
-    gravity_torque = Mp * p["g"] * lp * ca.sin(alpha) - p["Bp"] * alphadot
     D = (Mc + Mp) * Ip + Mc * Mp * lp**2 + Mp**2 * lp**2 * ca.sin(alpha) ** 2
     # Without a pendulum (calibration ramps) D = 0: the cart alone obeys Mc xddot = F - Beq xdot.
-    has_pendulum = Ip + Mp * lp**2 > 0
     D_safe = ca.if_else(has_pendulum, D, 1.0)
     xddot = ca.if_else(
         has_pendulum,
-        ((Ip + Mp * lp**2) * cart_force + Mp * lp * ca.cos(alpha) * gravity_torque) / D_safe,
+        (J * cart_force + Mp * lp * ca.cos(alpha) * gravity_torque) / D_safe,
         (F - p["Beq"] * xdot) / Mc,
     )
     alphaddot = ca.if_else(
@@ -139,9 +195,118 @@ def plant_equations(
         (Mp * lp * ca.cos(alpha) * cart_force + (Mc + Mp) * gravity_torque) / D_safe + poke,
         0.0,
     )
-    derivative = ca.vertcat(xdot, xddot, alphadot, alphaddot)
-    signals = {"V_applied": V_applied, "current": current, "F_motor": F_motor, "F_friction": F_friction}
+    # End stops: a cart at a stop and pushed into it is held there (the track takes the force); the
+    # pendulum then swings about a fixed pivot. Co-Simulation's RK4 also projects the position back
+    # onto the stop and kills the outward speed after each sub-step (plant_rk4).
+    L = p["track_half_length"]
+    if regime is None:
+        blocked = ca.logic_or(
+            ca.logic_and(ca.logic_and(x >= L, xdot >= 0), xddot > 0),
+            ca.logic_and(ca.logic_and(x <= -L, xdot <= 0), xddot < 0),
+        )
+    else:
+        blocked = ca.fabs(regime[2]) > 0.5
+    alphaddot_held = ca.if_else(has_pendulum, gravity_torque / ca.if_else(has_pendulum, J, 1.0) + poke, 0.0)
+    derivative = ca.vertcat(
+        ca.if_else(blocked, 0.0, xdot),
+        ca.if_else(blocked, 0.0, xddot),
+        alphadot,
+        ca.if_else(blocked, alphaddot_held, alphaddot),
+    )
+    signals = {
+        "V_applied": V_applied, "current": current, "current_raw": raw, "F_motor": F_motor,
+        "F_friction": F_friction, "xddot_free": xddot,
+    }
+    if not smooth_friction:
+        signals["F_hold"] = F_hold
     return derivative, signals
+
+
+def _encoder_count(value: ca.SX, step: ca.SX) -> ca.SX:
+    safe_step = ca.if_else(step > 0, step, 1.0)
+    return ca.if_else(step > 0, ca.sign(value) * ca.floor(ca.fabs(value) / safe_step + 0.5), 0.0)
+
+
+def regime_at(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Event update of the Model Exchange plant: the discrete state the law picks at this point.
+
+    The law is the one Co-Simulation evaluates at every step (:func:`plant_equations` with
+    ``regime=None``); an end stop reached from inside resets the cart onto the stop, at rest.
+
+    Returns
+    -------
+    regime : SX (5,)
+        The new :data:`REGIME`.
+    state : SX (4,)
+        The state after the event (changed only when the cart hits a stop).
+    """
+    x, xdot = state[0], state[1]
+    L = p["track_half_length"]
+    held = regime[2]
+    # A cart arriving at a stop stops dead there.
+    hit_upper = ca.logic_and(held == 0, ca.logic_and(x >= L, xdot >= 0))
+    hit_lower = ca.logic_and(held == 0, ca.logic_and(x <= -L, xdot <= 0))
+    x_new = ca.if_else(hit_upper, L, ca.if_else(hit_lower, -L, x))
+    xdot_new = ca.if_else(ca.logic_or(ca.logic_or(hit_upper, hit_lower), held != 0), 0.0, xdot)
+    new_state = ca.vertcat(x_new, xdot_new, state[2], state[3])
+    _, raw, _, _ = _amplifier(V, xdot_new, p, None)
+    current_mode = _current_mode(raw, p)
+    _, _, _, F_motor = _amplifier(V, xdot_new, p, current_mode)
+    friction = _friction_regime(xdot_new, F_motor, p)
+
+    def push(regime_value: float) -> ca.SX:
+        # The cart's acceleration along its velocity under a given friction regime (> 0: speeding up).
+        r = ca.vertcat(regime_value, current_mode, 0.0, 0.0, 0.0)
+        return ca.sign(xdot_new) * plant_equations(new_state, V, p, t, regime=r)[1]["xddot_free"]
+
+    # On a speed surface the law's choice may be pushed straight back across it: pick the side whose
+    # dynamics leave the surface into its own region, or slide on the surface if both push onto it.
+    speed = ca.fabs(xdot_new)
+    on_v1 = ca.logic_and(ca.fabs(speed - p["v1"]) < SURFACE_TOLERANCE, ca.logic_and(ca.fabs(F_motor) < p["F1"], ca.fabs(F_motor) < p["F2"]))
+    on_v1 = ca.logic_and(on_v1, p["v1"] < p["v2"])
+    on_v2 = ca.logic_and(ca.fabs(speed - p["v2"]) < SURFACE_TOLERANCE, ca.fabs(F_motor) < p["F2"])
+    at_v1 = ca.if_else(push(STICK) < 0, STICK, ca.if_else(push(SLIP) > 0, SLIP, SLIDE_V1))
+    at_v2 = ca.if_else(push(SLIP) < 0, SLIP, ca.if_else(push(FREE) > 0, FREE, SLIDE_V2))
+    friction = ca.if_else(on_v1, at_v1, ca.if_else(on_v2, at_v2, friction))
+    free = ca.vertcat(friction, current_mode, 0.0, 0.0, 0.0)
+    xddot = plant_equations(new_state, V, p, t, regime=free)[1]["xddot_free"]
+    # At a stop the cart stays while the net force pushes it into the stop.
+    at_upper = ca.logic_and(x_new >= L, xddot > 0)
+    at_lower = ca.logic_and(x_new <= -L, xddot < 0)
+    stop = ca.if_else(at_upper, 1.0, ca.if_else(at_lower, -1.0, 0.0))
+    new_regime = ca.vertcat(
+        friction, current_mode, stop, _encoder_count(state[2], p["q_alpha"]), _encoder_count(x_new, p["q_x"])
+    )
+    return new_regime, new_state
+
+
+def event_indicators(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> ca.SX:
+    """The zero-crossing functions of :data:`EVENT_INDICATORS`: each changes sign where a switch of the
+    right-hand side changes. A switch that is turned off by its parameter gives
+    a constant."""
+    x, xdot = state[0], state[1]
+    _, signals = plant_equations(state, V, p, t, regime=regime)
+    F_motor, raw = signals["F_motor"], signals["current_raw"]
+    stick_on, slip_on, limit_on = p["F1"] > 0, p["F2"] > 0, p["I_max"] > 0
+    L, stop = p["track_half_length"], regime[2]
+
+    friction, F_hold = regime[0], signals["F_hold"]
+    # While sliding, the holding force must stay between the two sides' forces.
+    slide_v1 = (F_hold + F_motor) * (-p["B"] * xdot - F_hold)
+    slide_v2 = (F_hold + p["B"] * xdot) * (0.0 - F_hold)
+    return ca.vertcat(
+        ca.if_else(friction == SLIDE_V1, slide_v1, ca.if_else(stick_on, p["v1"] - ca.fabs(xdot), 1.0)),
+        ca.if_else(stick_on, p["F1"] - ca.fabs(F_motor), -1.0),
+        ca.if_else(friction == SLIDE_V2, slide_v2, ca.if_else(slip_on, p["v2"] - ca.fabs(xdot), 1.0)),
+        ca.if_else(slip_on, p["F2"] - ca.fabs(F_motor), -1.0),
+        ca.if_else(limit_on, p["I_max"] - raw, 1.0),
+        ca.if_else(limit_on, p["I_max"] + raw, 1.0),
+        p["V_max"] - V,
+        p["V_max"] + V,
+        # Free: distance to each stop. Held: how hard the cart is pressed into its stop.
+        ca.if_else(stop == 0, L - x, stop * signals["xddot_free"]),
+        ca.if_else(stop == 0, x + L, 1.0),
+    )
 
 
 @dataclass(frozen=True)
@@ -184,14 +349,31 @@ class PlantModel:
     def rk4(self) -> ca.Function:
         return _functions(self.smooth_friction)[2]
 
+    @property
+    def ode_regime(self) -> ca.Function:
+        """``plant_ode_regime(state[4], V, p[np], t, regime[5]) -> derivative[4]``: the right-hand side
+        with the switches frozen (Model Exchange between events)."""
+        return _regime_functions()[0]
+
+    @property
+    def indicators(self) -> ca.Function:
+        """``plant_indicators(state[4], V, p[np], t, regime[5]) -> z[10]`` (:data:`EVENT_INDICATORS`)."""
+        return _regime_functions()[1]
+
+    @property
+    def event_update(self) -> ca.Function:
+        """``plant_event(state[4], V, p[np], t, regime[5]) -> (regime[5], state[4])`` (:func:`regime_at`)."""
+        return _regime_functions()[2]
+
     def generate_c(self, directory: Path, name: str = "plant_casadi") -> Path:
-        """Write the C code of ``plant_ode``, ``plant_outputs`` and ``plant_rk4`` to ``directory``.
+        """Write the C code of ``plant_ode``, ``plant_outputs``, ``plant_rk4`` and the Model Exchange
+        functions ``plant_ode_regime``, ``plant_indicators``, ``plant_event`` to ``directory``.
 
         Returns the path of the ``.c`` file; a header of the same stem is written beside it.
         """
         directory.mkdir(parents=True, exist_ok=True)
         gen = ca.CodeGenerator(f"{name}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
-        for function in (self.ode, self.outputs, self.rk4):
+        for function in (self.ode, self.outputs, self.rk4, self.ode_regime, self.indicators, self.event_update):
             gen.add(function)
         gen.generate(str(directory) + "/")
         return directory / f"{name}.c"
@@ -266,8 +448,32 @@ def _functions(smooth_friction: bool) -> tuple[ca.Function, ca.Function, ca.Func
     k3 = f(state + h / 2 * k2)
     k4 = f(state + h * k3)
     stepped = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    # End stops: a sub-step that carries the cart past a stop ends on the stop, with no outward speed.
+    L = p["track_half_length"]
+    x_next, v_next = stepped[0], stepped[1]
+    stepped = ca.vertcat(
+        ca.fmin(ca.fmax(x_next, -L), L),
+        ca.if_else(x_next >= L, ca.fmin(v_next, 0.0), ca.if_else(x_next <= -L, ca.fmax(v_next, 0.0), v_next)),
+        stepped[2],
+        stepped[3],
+    )
     rk4 = ca.Function("plant_rk4", [state, V, pvec, t, h], [stepped], ["state", "V", "p", "t", "h"], ["next"])
     return ode, outputs, rk4
+
+
+@lru_cache(maxsize=None)
+def _regime_functions() -> tuple[ca.Function, ca.Function, ca.Function]:
+    model = PlantModel()
+    state, V, pvec, t, p = model._symbols()
+    regime = ca.SX.sym("regime", len(REGIME))
+    args, names = [state, V, pvec, t, regime], ["state", "V", "p", "t", "regime"]
+    derivative = plant_equations(state, V, p, t, regime=regime)[0]
+    ode = ca.Function("plant_ode_regime", args, [derivative], names, ["derivative"])
+    z = event_indicators(state, V, p, t, regime)
+    indicators = ca.Function("plant_indicators", args, [z], names, ["z"])
+    new_regime, new_state = regime_at(state, V, p, t, regime)
+    update = ca.Function("plant_event", args, [new_regime, new_state], names, ["regime_next", "state_next"])
+    return ode, indicators, update
 
 
 @lru_cache(maxsize=None)

@@ -290,6 +290,14 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0;
+#if N_EVENT_INDICATORS > 0
+    {
+        int states_changed = 0;
+        fmi2Status status = model_event_update(comp, &states_changed);
+        if (status > fmi2Warning) return status;
+        info->valuesOfContinuousStatesChanged = states_changed ? fmi2True : fmi2False;
+    }
+#endif
 #if N_STATES > 0
     {
         double next = model_next_time_event(comp);
@@ -357,9 +365,18 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
     Instance *comp = (Instance *)c;
-    UNUSED(eventIndicators);
     CHECK("fmi2GetEventIndicators", M(MODE_INITIALIZATION) | M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_TERMINATED));
-    return ni == 0 ? fmi2OK : fmi2Error;
+    if (ni != N_EVENT_INDICATORS) {
+        fmu_log(comp, fmi2Error, "logStatusError", "fmi2GetEventIndicators: %u indicators asked, the model has %d",
+                (unsigned)ni, N_EVENT_INDICATORS);
+        return fmi2Error;
+    }
+#if N_EVENT_INDICATORS > 0
+    model_get_event_indicators(comp, eventIndicators);
+#else
+    UNUSED(eventIndicators);
+#endif
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real states[], size_t nx) {

@@ -47,6 +47,11 @@ void model_get_derivatives(Instance *comp, double dx[]);
 /* Next time event after comp->time, or a negative number if none. */
 double model_next_time_event(Instance *comp);
 #endif
+#if N_EVENT_INDICATORS > 0
+void model_get_event_indicators(Instance *comp, double z[]);
+/* Event mode: update the discrete state; set *states_changed if the continuous states were reset. */
+fmi2Status model_event_update(Instance *comp, int *states_changed);
+#endif
 
 /* ---- provided by the wrapper ---- */
 void fmu_log(Instance *comp, fmi2Status status, const char *category, const char *message, ...);

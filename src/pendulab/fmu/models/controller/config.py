@@ -38,4 +38,6 @@ def spec() -> ModelSpec:
         description="Student controller: discrete linear time-invariant block x+ = A x + B e, V = C x + D e, e = r - Lp*alpha",
         variables=variables,
         defines={"MAX_ORDER": str(n)},
+        # doStep refuses any step other than h: the matrices hold for that sample period only.
+        variable_step=False,
     )

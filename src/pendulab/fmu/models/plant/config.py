@@ -7,7 +7,7 @@ from pathlib import Path
 
 from pendulab.fmu.description import ModelSpec, Variable
 from pendulab.model.parameters import PlantParameters
-from pendulab.model.plant import MAX_SUBSTEP, STATES, PlantModel
+from pendulab.model.plant import EVENT_INDICATORS, MAX_SUBSTEP, REGIME, STATES, PlantModel
 
 _STATE_TEXT = {
     "x": ("m", "Cart position (positive to the right, 0 at track centre)"),
@@ -44,21 +44,23 @@ def spec() -> ModelSpec:
         model = PlantModel()
         c_file = model.generate_c(Path(tmp))
         generated = {"plant_casadi.c": c_file.read_text(), "plant_casadi.h": c_file.with_suffix(".h").read_text()}
-        functions = (model.ode, model.outputs, model.rk4)
+        functions = (model.ode, model.outputs, model.rk4, model.ode_regime, model.indicators, model.event_update)
         work_doubles = max(f.sz_w() for f in functions)
         work_ints = max(f.sz_iw() for f in functions)
     names = PlantParameters.names()
     return ModelSpec(
         identifier="Plant",
-        description="Cart and inverted pendulum (Quanser IP02 style): DC motor, stick-slip friction, encoder quantization, poke",
+        description="Cart and inverted pendulum (Quanser IP02 style): DC motor, stick-slip friction, encoder quantization, track end stops, poke",
         variables=states + derivatives + signals + parameters,
         states=STATES,
         sources=["model.c", "plant_casadi.c"],
+        event_indicators=len(EVENT_INDICATORS),
         generated=generated,
         defines={
             "VR_FIRST_PARAMETER": f"VR_{names[0]}",
             "N_PARAMETERS": str(len(names)),
             "MAX_SUBSTEP": repr(MAX_SUBSTEP),
+            "N_REGIME": str(len(REGIME)),
             "PLANT_WORK_DOUBLES": str(max(1, work_doubles)),
             "PLANT_WORK_INTS": str(max(1, work_ints)),
             "PARAMETER_NAMES": "((const char *[]){" + ", ".join(f'"{n}"' for n in names) + "})",

@@ -9,11 +9,19 @@
 #include "fmu_model.h"
 #include "plant_casadi.h"
 
+fmi2Status model_event_update(Instance *comp, int *states_changed);
+
 #define STATE(comp) (&(comp)->r[VR_x])
 #define PARAMS(comp) (&(comp)->r[VR_FIRST_PARAMETER])
 
-/* The generated functions need scratch vectors; their sizes are fixed by the generated code. */
+/* The generated functions need scratch vectors; their sizes are fixed by the generated code.
+ * regime is Model Exchange's discrete state (pendulab.model.plant.REGIME: friction regime, current-limit
+ * branch, end stop, encoder counts): it changes only in event mode, so the right-hand side
+ * (plant_ode_regime) is smooth between events and the event indicators (plant_indicators) mark
+ * every switch. Co-Simulation's RK4 decides the switches at each evaluation (plant_rk4). */
 typedef struct {
+    double regime[N_REGIME];
+    double regime_next[N_REGIME];
     double next[N_STATES];
     double derivative[N_STATES];
     double y[4];
@@ -38,16 +46,64 @@ fmi2Status model_initialize(Instance *comp) {
         fmu_log(comp, fmi2Error, "logStatusError", "Rm, r_mp, Kg and M_cart must be > 0 and Mp >= 0");
         return fmi2Error;
     }
+    if (comp->r[VR_track_half_length] <= 0) {
+        fmu_log(comp, fmi2Error, "logStatusError", "track_half_length=%g must be > 0", comp->r[VR_track_half_length]);
+        return fmi2Error;
+    }
+    {
+        int changed;
+        memset(((Work *)comp->work)->regime, 0, sizeof(((Work *)comp->work)->regime));
+        return model_event_update(comp, &changed);
+    }
+}
+
+fmi2Status model_event_update(Instance *comp, int *states_changed) {
+    Work *w = (Work *)comp->work;
+    const double *arg[5];
+    double *res[2];
+    double t = comp->time;
+    int round;
+    *states_changed = 0;
+    if (!isfinite(comp->r[VR_V])) {
+        fmu_log(comp, fmi2Error, "logStatusError", "input V=%g is not finite at t=%g", comp->r[VR_V], t);
+        return fmi2Error;
+    }
+    arg[0] = STATE(comp); arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &t; arg[4] = w->regime;
+    res[0] = w->regime_next; res[1] = w->next;
+    /* Iterate to a fixed point: a stop reached resets the speed, which may change the friction regime. */
+    for (round = 0; round < 8; round++) {
+        plant_event(arg, res, w->iw, w->w, 0);
+        if (memcmp(w->next, STATE(comp), sizeof(w->next)) != 0) {
+            memcpy(STATE(comp), w->next, sizeof(w->next));
+            *states_changed = 1;
+        } else if (memcmp(w->regime_next, w->regime, sizeof(w->regime)) == 0) {
+            break;
+        }
+        memcpy(w->regime, w->regime_next, sizeof(w->regime));
+    }
+    comp->outputs_stale = 1;
     return fmi2OK;
+}
+
+void model_get_event_indicators(Instance *comp, double z[]) {
+    Work *w = (Work *)comp->work;
+    const double *arg[5];
+    double *res[1];
+    double t = comp->time;
+    arg[0] = STATE(comp); arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &t; arg[4] = w->regime;
+    res[0] = z;
+    plant_indicators(arg, res, w->iw, w->w, 0);
 }
 
 static void ode(Instance *comp, const double *state, double t, double *derivative) {
     Work *w = (Work *)comp->work;
-    const double *arg[4];
+    const double *arg[5];
     double *res[1];
-    arg[0] = state; arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &t;
+    arg[0] = state; arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &t; arg[4] = w->regime;
     res[0] = derivative;
-    plant_ode(arg, res, w->iw, w->w, 0);
+    /* Model Exchange: the switches as the last event left them; Co-Simulation: decided here. */
+    if (comp->type == fmi2ModelExchange) plant_ode_regime(arg, res, w->iw, w->w, 0);
+    else plant_ode(arg, res, w->iw, w->w, 0);
 }
 
 fmi2Status model_do_step(Instance *comp, double t, double h) {
