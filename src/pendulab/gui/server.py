@@ -6,7 +6,7 @@ from installed files, so the GUI needs no internet. Each simulation runs in its 
 listed only in the tab that started or opened it, so two tabs never mix their runs.
 
 Only this module's standard-library imports happen at start-up: the first page is drawn before
-numpy, python-control or CasADi are imported (SPEC: the first page within 3 s).
+numpy, python-control or CasADi are imported (the bar: the first page within 3 s, bench/gui.py).
 """
 
 from __future__ import annotations
