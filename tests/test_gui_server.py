@@ -229,3 +229,30 @@ def test_upload_of_the_old_labs_mat_calibration(server, tmp_path):
     form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "calibration": answer["key"]}
     status, linear = request(server, "POST", "/api/linear", body=json.dumps(form).encode())
     assert status == 200 and linear["ok"]
+
+
+def test_a_failed_simulation_reaches_the_page_as_one_message(tmp_path, monkeypatch):
+    import queue
+
+    import pendulab.cosim.pendulum as pendulum
+    from pendulab.cosim.master import SimulationError
+    from pendulab.gui.worker import run_simulation
+
+    form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "2",
+            "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}}
+    settings = run_settings(form, None, "default")
+
+    def fail(*args, **kwargs):
+        raise SimulationError("plant.fmu: fmi2DoStep returned fmi2Error at t=1.2")
+
+    monkeypatch.setattr(pendulum, "simulate_poke", fail)
+    q = queue.Queue()
+    run_simulation(settings, str(tmp_path / "run"), q)
+    kind, message = q.get_nowait()
+    assert kind == "error" and message.startswith("the simulation failed: plant.fmu: fmi2DoStep returned fmi2Error at t=1.2")
+    assert not (tmp_path / "run").exists()  # nothing half-written
+
+    monkeypatch.setattr(pendulum, "simulate_poke", lambda *a, **k: 1 / 0)
+    run_simulation(settings, str(tmp_path / "run"), q)
+    kind, message = q.get_nowait()
+    assert kind == "error" and "internal error (ZeroDivisionError" in message
