@@ -22,15 +22,7 @@ pytestmark = [
 POKE = "220,0.005,1"
 
 
-@pytest.fixture(scope="module")
-def twin_run(tmp_path_factory):
-    from pendulab.fmu.build import ensure_fmu
-    from pendulab.hil.firmware import build_firmware, build_twin
-
-    for name in ("Plant", "Controller", "Supervisor"):
-        ensure_fmu(name)
-    build_firmware(), build_twin()
-    out = tmp_path_factory.mktemp("fwlab") / "demo"
+def _session(out):
     with emulator("--firmware", "--raise-after", "0.3", "--poke", POKE) as emu:
         # --max-delay 8: on a loaded CI machine the host may need more than 4 periods; the check is against
         # simulate --delay N at whatever N the lab measured.
@@ -53,6 +45,26 @@ def twin_run(tmp_path_factory):
         stdout, stderr = proc.communicate(timeout=30)
         text = emu.text
     return out, proc.returncode, stdout, stderr, text
+
+
+#: lab's own verdicts on a host too slow for the link (the pty on a swamped machine), not on the rig.
+HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time")
+
+
+@pytest.fixture(scope="module")
+def twin_run(tmp_path_factory):
+    from pendulab.fmu.build import ensure_fmu
+    from pendulab.hil.firmware import build_firmware, build_twin
+
+    for name in ("Plant", "Controller", "Supervisor"):
+        ensure_fmu(name)
+    build_firmware(), build_twin()
+    base = tmp_path_factory.mktemp("fwlab")
+    result = _session(base / "demo")
+    if result[1] != 0 and any(why in result[2] + result[3] for why in HOST_TOO_SLOW):
+        print("the host was too slow for the link (machine load); one more session")
+        result = _session(base / "demo2")
+    return result
 
 
 def test_demo_controller_balances_through_lab_twin_and_firmware(twin_run):
