@@ -256,3 +256,24 @@ def test_a_failed_simulation_reaches_the_page_as_one_message(tmp_path, monkeypat
     run_simulation(settings, str(tmp_path / "run"), q)
     kind, message = q.get_nowait()
     assert kind == "error" and "internal error (ZeroDivisionError" in message
+
+
+def test_opens_the_browser_at_its_address(tmp_path):
+    import os
+    import time
+
+    seen = tmp_path / "opened.txt"
+    script = tmp_path / "browser.py"
+    script.write_text(f"import sys\nopen({str(seen)!r}, 'w').write(sys.argv[1])\n")
+    env = {**os.environ, "BROWSER": f"{sys.executable} {script} %s"}  # webbrowser's own way to name the browser
+    process = subprocess.Popen([sys.executable, "-m", "pendulab", "gui", "--out", str(tmp_path / "runs")],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        url = process.stdout.readline().split(" at ")[1].split()[0]
+        deadline = time.monotonic() + 20
+        while not (seen.is_file() and seen.read_text()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert seen.read_text() == url
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
