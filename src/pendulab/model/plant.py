@@ -148,11 +148,18 @@ def plant_equations(
     derivative : SX (4,)
     signals : dict
         ``V_applied``, ``current``, ``current_raw``, ``F_motor``, ``F_friction``, ``xddot_free`` (the
-        cart's acceleration if no end stop held it).
+        cart's acceleration if no end stop held it) and, with the stick-slip switches, ``F_hold`` (the
+        friction force that would keep the speed constant).
     """
     x, xdot, alpha, alphadot = state[0], state[1], state[2], state[3]
 
     V_applied, raw, current, F_motor = _amplifier(V, xdot, p, None if regime is None else regime[1])
+
+    Mc = p["M_cart"] + p["eta_g"] * p["Kg"] ** 2 * p["Jm"] / p["r_mp"] ** 2
+    Mp, lp, Ip = p["Mp"], p["lp"], p["Ip"]
+    J = Ip + Mp * lp**2
+    has_pendulum = J > 0
+    gravity_torque = Mp * p["g"] * lp * ca.sin(alpha) - p["Bp"] * alphadot
 
     # Stick-slip friction (the lab's calibrated model).
     if smooth_friction:
@@ -161,19 +168,14 @@ def plant_equations(
         stick = _smooth_step(p["v1"] - speed, 2e-3) * _smooth_step(p["F1"] - force, 0.05)
         slip = _smooth_step(p["v2"] - speed, 5e-3) * _smooth_step(p["F2"] - force, 0.05)
         F_friction = -stick * F_motor - (1 - stick) * slip * p["B"] * xdot
-    Mc = p["M_cart"] + p["eta_g"] * p["Kg"] ** 2 * p["Jm"] / p["r_mp"] ** 2
-    Mp, lp, Ip = p["Mp"], p["lp"], p["Ip"]
-    J = Ip + Mp * lp**2
-    has_pendulum = J > 0
-    gravity_torque = Mp * p["g"] * lp * ca.sin(alpha) - p["Bp"] * alphadot
-    if smooth_friction:
-        pass
+        F_hold = None
     else:
-        # The friction force that makes xddot = 0 (a sliding regime holds the speed on its surface).
-        base = F_motor - p["Beq"] * xdot - Mp * lp * ca.sin(alpha) * alphadot**2
-        F_hold = ca.if_else(has_pendulum, -(base + Mp * lp * ca.cos(alpha) * gravity_torque / ca.if_else(has_pendulum, J, 1.0)), -base)
         friction = _friction_regime(xdot, F_motor, p) if regime is None else regime[0]
         F_friction = ca.if_else(friction > 1.5, -F_motor, ca.if_else(friction > 0.5, -p["B"] * xdot, 0.0))
+        # The friction force that makes xddot = 0: a sliding regime holds the speed on its surface.
+        base = F_motor - p["Beq"] * xdot - Mp * lp * ca.sin(alpha) * alphadot**2
+        J_safe = ca.if_else(has_pendulum, J, 1.0)
+        F_hold = ca.if_else(has_pendulum, -(base + Mp * lp * ca.cos(alpha) * gravity_torque / J_safe), -base)
         if regime is not None:  # the sliding regimes exist only as Model Exchange's discrete state
             F_friction = ca.if_else(friction > 2.5, F_hold, F_friction)
     F = F_motor + F_friction
@@ -217,7 +219,7 @@ def plant_equations(
         "V_applied": V_applied, "current": current, "current_raw": raw, "F_motor": F_motor,
         "F_friction": F_friction, "xddot_free": xddot,
     }
-    if not smooth_friction:
+    if F_hold is not None:
         signals["F_hold"] = F_hold
     return derivative, signals
 
