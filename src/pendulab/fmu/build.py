@@ -178,10 +178,14 @@ def _build_description(identifier: str, c_files: Iterable[str]) -> str:
 
 
 def is_current(path: Path) -> bool:
-    """Whether ``path`` is an FMU built from the current sources."""
+    """Whether ``path`` is an FMU built from the current sources (and, where mingw-w64 has been installed
+    since, with its win64 binary)."""
     try:
         with zipfile.ZipFile(path) as zf:
-            return zf.comment.decode(errors="replace") == _STAMP + source_hash()
+            if zf.comment.decode(errors="replace") != _STAMP + source_hash():
+                return False
+            wants_win64 = platform.system() != "Windows" and shutil.which(WIN64_COMPILER) is not None
+            return not wants_win64 or any(n.startswith("binaries/win64/") for n in zf.namelist())
     except (OSError, zipfile.BadZipFile):
         return False
 
@@ -200,6 +204,9 @@ def ensure_fmu(name: str, out_dir: Path | None = None, *, progress: Callable[[st
 def build_all(out_dir: Path | None = None, names: Iterable[str] | None = None, *, progress: Callable[[str], None] = print) -> list[Path]:
     """Build every FMU (or the named ones) and return their paths."""
     paths = []
+    if platform.system() != "Windows" and shutil.which(WIN64_COMPILER) is None:
+        progress(f"no win64 binaries: the mingw-w64 cross compiler ({WIN64_COMPILER}) is not installed "
+                 "(apt-get install gcc-mingw-w64-x86-64); building for this platform only")
     for name in names or MODELS:
         progress(f"building {name}.fmu")
         paths.append(build_fmu(name, out_dir))

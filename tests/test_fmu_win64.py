@@ -1,0 +1,74 @@
+"""The FMUs' win64 binaries, proven under Wine against the linux64 ones (issue 11, parts 1-2).
+
+One plain C host (tests/hosts/fmu_host.c) is built natively and with mingw-w64; each runs the same
+reference cases (the plant's open-loop case, plant and controller in a loop) on its platform's binaries.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import read_model_description
+
+from pendulab.fmu.build import FMI_HEADERS, WIN64_COMPILER
+
+HOST = Path(__file__).parent / "hosts" / "fmu_host.c"
+WINE = shutil.which("wine64") or ("/usr/lib/wine/wine64" if Path("/usr/lib/wine/wine64").exists() else None)
+SUFFIX = {"linux64": ".so", "win64": ".dll"}
+
+
+def test_every_fmu_carries_both_platforms(plant_fmu, controller_fmu, supervisor_fmu):
+    """A missing binary for either platform fails here (an FMU built without mingw-w64 has no win64)."""
+    for fmu in (plant_fmu, controller_fmu, supervisor_fmu):
+        names = set(zipfile.ZipFile(fmu).namelist())
+        for platform_dir, suffix in SUFFIX.items():
+            assert f"binaries/{platform_dir}/{fmu.stem}{suffix}" in names, (fmu.name, platform_dir)
+
+
+def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supervisor_fmu, tmp_path):
+    for fmu in (plant_fmu, controller_fmu, supervisor_fmu):
+        dll = tmp_path / f"{fmu.stem}.dll"
+        dll.write_bytes(zipfile.ZipFile(fmu).read(f"binaries/win64/{fmu.stem}.dll"))
+        dump = subprocess.run(["x86_64-w64-mingw32-objdump", "-p", str(dll)], capture_output=True, text=True, check=True).stdout
+        imports = {line.split(":")[1].strip().lower() for line in dump.splitlines() if "DLL Name:" in line}
+        assert imports == {"kernel32.dll", "msvcrt.dll"}, (fmu.name, imports)
+
+
+def _arguments(plant_fmu: Path, controller_fmu: Path, folder: Path, platform_dir: str) -> list[str]:
+    args = []
+    for fmu in (plant_fmu, controller_fmu):
+        binary = folder / f"{fmu.stem}{SUFFIX[platform_dir]}"
+        binary.write_bytes(zipfile.ZipFile(fmu).read(f"binaries/{platform_dir}/{fmu.stem}{SUFFIX[platform_dir]}"))
+        args += [str(binary), read_model_description(str(fmu)).guid]
+    plant = {v.name: v.valueReference for v in read_model_description(str(plant_fmu)).modelVariables}
+    ctl = {v.name: v.valueReference for v in read_model_description(str(controller_fmu)).modelVariables}
+    refs = [plant[n] for n in ("V", "x", "xdot", "alpha", "alphadot", "alpha_measured")]
+    refs += [ctl[n] for n in ("alpha_measured", "V_command", "n", "A[1,1]", "B[1]", "C[1]", "D")]
+    return args + ["1500"] + [str(r) for r in refs]
+
+
+@pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
+def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, tmp_path):
+    results = {}
+    for platform_dir, compiler, out in (("linux64", "cc", "host"), ("win64", WIN64_COMPILER, "host.exe")):
+        folder = tmp_path / platform_dir
+        folder.mkdir()
+        libs = ["-ldl", "-lm"] if platform_dir == "linux64" else ["-lm"]
+        subprocess.run([compiler, "-std=c99", "-O1", f"-I{FMI_HEADERS}", str(HOST), "-o", str(folder / out), *libs],
+                       check=True, capture_output=True)
+        command = [str(folder / out)] if platform_dir == "linux64" else [WINE, str(folder / out)]
+        env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wineprefix")}
+        run = subprocess.run(command + _arguments(plant_fmu, controller_fmu, folder, platform_dir),
+                             capture_output=True, text=True, timeout=300, env=env)
+        assert run.returncode == 0, (platform_dir, run.stdout, run.stderr)
+        lines = [line for line in run.stdout.splitlines() if line.strip()]
+        results[platform_dir] = [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
+    for linux, windows in zip(results["linux64"], results["win64"]):
+        assert np.all(np.isfinite(linux)) and np.any(linux != 0)
+        np.testing.assert_allclose(windows, linux, rtol=0, atol=1e-12)
