@@ -40,21 +40,22 @@ def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supe
         assert imports == {"kernel32.dll", "msvcrt.dll"}, (fmu.name, imports)
 
 
-def _arguments(plant_fmu: Path, controller_fmu: Path, folder: Path, platform_dir: str) -> list[str]:
+def _arguments(fmus: tuple[Path, Path, Path], folder: Path, platform_dir: str) -> list[str]:
     args = []
-    for fmu in (plant_fmu, controller_fmu):
+    for fmu in fmus:
         binary = folder / f"{fmu.stem}{SUFFIX[platform_dir]}"
         binary.write_bytes(zipfile.ZipFile(fmu).read(f"binaries/{platform_dir}/{fmu.stem}{SUFFIX[platform_dir]}"))
         args += [str(binary), read_model_description(str(fmu)).guid]
-    plant = {v.name: v.valueReference for v in read_model_description(str(plant_fmu)).modelVariables}
-    ctl = {v.name: v.valueReference for v in read_model_description(str(controller_fmu)).modelVariables}
-    refs = [plant[n] for n in ("V", "x", "xdot", "alpha", "alphadot", "alpha_measured")]
+    plant, ctl, sup = ({v.name: v.valueReference for v in read_model_description(str(f)).modelVariables} for f in fmus)
+    refs = [plant[n] for n in ("V", "x", "xdot", "alpha", "alphadot", "alpha_measured", "x_measured")]
     refs += [ctl[n] for n in ("alpha_measured", "V_command", "n", "A[1,1]", "B[1]", "C[1]", "D")]
+    refs += [sup[n] for n in ("V_command", "alpha_measured", "x_measured", "V")]
     return args + ["1500"] + [str(r) for r in refs]
 
 
 @pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
-def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, tmp_path):
+def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, supervisor_fmu, tmp_path):
+    """The plant's open-loop case and the loop of the three FMUs: Wine's results equal linux64's to 1e-12."""
     results = {}
     for platform_dir, compiler, out in (("linux64", "cc", "host"), ("win64", WIN64_COMPILER, "host.exe")):
         folder = tmp_path / platform_dir
@@ -64,11 +65,12 @@ def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, tmp_
                        check=True, capture_output=True)
         command = [str(folder / out)] if platform_dir == "linux64" else [WINE, str(folder / out)]
         env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wineprefix")}
-        run = subprocess.run(command + _arguments(plant_fmu, controller_fmu, folder, platform_dir),
+        run = subprocess.run(command + _arguments((plant_fmu, controller_fmu, supervisor_fmu), folder, platform_dir),
                              capture_output=True, text=True, timeout=300, env=env)
         assert run.returncode == 0, (platform_dir, run.stdout, run.stderr)
         lines = [line for line in run.stdout.splitlines() if line.strip()]
         results[platform_dir] = [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
     for linux, windows in zip(results["linux64"], results["win64"]):
         assert np.all(np.isfinite(linux)) and np.any(linux != 0)
+        print("\nlinux64", linux, "\nwin64  ", windows, "\nmax |difference|", np.max(np.abs(windows - linux)))
         np.testing.assert_allclose(windows, linux, rtol=0, atol=1e-12)

@@ -1,11 +1,13 @@
 /* A plain C FMI 2.0 co-simulation host, built natively (dlopen) and with mingw-w64 (LoadLibrary, run
  * under Wine): the same reference cases on both platforms' binaries (issue 11).
  *
- * usage: fmu_host PLANT_LIB PLANT_GUID CONTROLLER_LIB CONTROLLER_GUID STEPS
- *        vr(V) vr(x) vr(xdot) vr(alpha) vr(alphadot) vr(alpha_measured)
+ * usage: fmu_host PLANT_LIB PLANT_GUID CONTROLLER_LIB CONTROLLER_GUID SUPERVISOR_LIB SUPERVISOR_GUID STEPS
+ *        vr(V) vr(x) vr(xdot) vr(alpha) vr(alphadot) vr(alpha_measured) vr(x_measured)
  *        vr(ctl.alpha_measured) vr(ctl.V_command) vr(ctl.n) vr(ctl.A[1,1]) vr(ctl.B[1]) vr(ctl.C[1]) vr(ctl.D)
+ *        vr(sup.V_command) vr(sup.alpha_measured) vr(sup.x_measured) vr(sup.V)
  * prints two lines of %.17g: the plant's states after the open-loop case (12 V sine from alpha = pi + 0.3),
- * then the plant's states and the controller's output after the closed loop of plant and controller. */
+ * then the plant's states, the controller's and the supervisor's voltage after the closed loop of the
+ * three FMUs (wired as pendulab.cosim.pendulum.CONNECTIONS, from alpha = 0.01 near upright). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -68,15 +70,18 @@ static fmi2Component start(Api *api, const char *name, const char *guid, fmi2Val
 }
 
 int main(int argc, char **argv) {
-    Api plant, ctl;
-    fmi2ValueReference vr[13];
-    fmi2Component p, c;
-    double v[4], u, y, one = 1.0;
+    Api plant, ctl, sup;
+    fmi2ValueReference vr[18];
+    fmi2Component p, c, s;
+    double v[4], u, y, xm, w;
     int k, n;
-    if (argc != 19) { fprintf(stderr, "usage: see fmu_host.c\n"); return 2; }
-    if (!load(argv[1], &plant) || !load(argv[3], &ctl)) { fprintf(stderr, "cannot load a library\n"); return 3; }
-    n = atoi(argv[5]);
-    for (k = 0; k < 13; k++) vr[k] = (fmi2ValueReference)atoi(argv[6 + k]);
+    if (argc != 26) { fprintf(stderr, "usage: see fmu_host.c\n"); return 2; }
+    if (!load(argv[1], &plant) || !load(argv[3], &ctl) || !load(argv[5], &sup)) {
+        fprintf(stderr, "cannot load a library\n");
+        return 3;
+    }
+    n = atoi(argv[7]);
+    for (k = 0; k < 18; k++) vr[k] = (fmi2ValueReference)atoi(argv[8 + k]);
 
     /* 1. the plant alone, open loop */
     p = start(&plant, "plant", argv[2], vr[3], PI + 0.3);
@@ -90,32 +95,40 @@ int main(int argc, char **argv) {
     printf("%.17g %.17g %.17g %.17g\n", v[0], v[1], v[2], v[3]);
     plant.free_instance(p);
 
-    /* 2. plant and controller in a loop: x+ = 0.5 x + e, V = 2 x + 3 e, e = -Lp alpha_measured */
-    p = start(&plant, "plant", argv[2], vr[3], PI + 0.3);
-    c = start(&ctl, "controller", argv[4], vr[9], 0.5);
-    if (!p || !c) return 6;
+    /* 2. the three FMUs in a loop: x+ = 0.9 x + e, V = 20 x + 30 e, e = -Lp alpha_measured */
+    p = start(&plant, "plant", argv[2], vr[3], 0.01);
+    c = start(&ctl, "controller", argv[4], vr[10], 0.9);
+    s = start(&sup, "supervisor", argv[6], vr[14], 0.0);
+    if (!p || !c || !s) return 6;
     {
         fmi2Integer order = 1;
-        double b = 1.0, cc = 2.0, d = 3.0;
-        ctl.set_integer(c, &vr[8], 1, &order);
-        ctl.set_real(c, &vr[10], 1, &b);
-        ctl.set_real(c, &vr[11], 1, &cc);
-        ctl.set_real(c, &vr[12], 1, &d);
+        double b = 1.0, cc = 20.0, d = 30.0;
+        ctl.set_integer(c, &vr[9], 1, &order);
+        ctl.set_real(c, &vr[11], 1, &b);
+        ctl.set_real(c, &vr[12], 1, &cc);
+        ctl.set_real(c, &vr[13], 1, &d);
     }
-    (void)one;
-    if (plant.leave(p) != fmi2OK || ctl.leave(c) != fmi2OK) return 7;
+    if (plant.leave(p) != fmi2OK || ctl.leave(c) != fmi2OK || sup.leave(s) != fmi2OK) return 7;
     for (k = 0; k < n; k++) {
         plant.get_real(p, &vr[5], 1, &y);
-        ctl.set_real(c, &vr[6], 1, &y);
-        ctl.get_real(c, &vr[7], 1, &u);
-        plant.set_real(p, &vr[0], 1, &u);
+        plant.get_real(p, &vr[6], 1, &xm);
+        ctl.set_real(c, &vr[7], 1, &y);
+        sup.set_real(s, &vr[15], 1, &y);
+        sup.set_real(s, &vr[16], 1, &xm);
+        ctl.get_real(c, &vr[8], 1, &u);
+        sup.set_real(s, &vr[14], 1, &u);
+        sup.get_real(s, &vr[17], 1, &w);
+        plant.set_real(p, &vr[0], 1, &w);
         if (ctl.do_step(c, k * 1e-3, 1e-3, fmi2True) != fmi2OK) return 8;
-        if (plant.do_step(p, k * 1e-3, 1e-3, fmi2True) != fmi2OK) return 9;
+        if (sup.do_step(s, k * 1e-3, 1e-3, fmi2True) != fmi2OK) return 9;
+        if (plant.do_step(p, k * 1e-3, 1e-3, fmi2True) != fmi2OK) return 10;
     }
     plant.get_real(p, &vr[1], 4, v);
-    ctl.get_real(c, &vr[7], 1, &u);
-    printf("%.17g %.17g %.17g %.17g %.17g\n", v[0], v[1], v[2], v[3], u);
+    ctl.get_real(c, &vr[8], 1, &u);
+    sup.get_real(s, &vr[17], 1, &w);
+    printf("%.17g %.17g %.17g %.17g %.17g %.17g\n", v[0], v[1], v[2], v[3], u, w);
     plant.free_instance(p);
     ctl.free_instance(c);
+    sup.free_instance(s);
     return 0;
 }
