@@ -61,6 +61,7 @@ def test_crc_check_value_and_polynomial():
         assert P.crc16(data) == bitwise(data)
 
 
+@settings(deadline=None)
 @given(st.binary(max_size=600))
 def test_cobs_round_trip_and_no_zero(data):
     encoded = P.cobs_encode(data)
@@ -69,6 +70,7 @@ def test_cobs_round_trip_and_no_zero(data):
     assert P.cobs_decode(encoded) == data
 
 
+@settings(deadline=None)
 @given(FRAMES)
 def test_every_frame_round_trips(frame):
     wire = P.encode(frame)
@@ -99,7 +101,7 @@ def test_every_single_bit_error_is_rejected(frame):
         assert _rejected(bytes(corrupted)), f"bit {bit} flipped in {frame} was accepted"
 
 
-@settings(max_examples=3000, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=3000, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(TYPICAL), st.integers(1, 16), st.data())
 def test_every_burst_up_to_16_bits_is_rejected(frame, length, data):
     wire = bytearray(P.encode(frame))
@@ -115,6 +117,7 @@ def test_every_burst_up_to_16_bits_is_rejected(frame, length, data):
     assert _rejected(bytes(wire))
 
 
+@settings(deadline=None)
 @given(st.binary(min_size=1, max_size=300), st.lists(FRAMES, min_size=1, max_size=5), st.integers(1, 40))
 def test_reader_resynchronizes_after_garbage(garbage, frames, chunk):
     reader = P.FrameReader()
