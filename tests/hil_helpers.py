@@ -15,17 +15,17 @@ PYTHON = sys.executable
 ENV = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
 
 
-class Emulator:
-    """``pendulab rig-emulator`` in a subprocess; its stderr is collected while it runs."""
+class PortProcess:
+    """A program that prints its port alone on its first stdout line and announces on stderr (collected)."""
 
-    def __init__(self, *args: str) -> None:
-        self.proc = subprocess.Popen(
-            [PYTHON, "-m", "pendulab", "rig-emulator", *args],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
-        )
+    #: Who speaks, for messages.
+    name = "process"
+
+    def __init__(self, command: list[str], **popen: object) -> None:
+        self.proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)  # type: ignore[call-overload]
         line = self.proc.stdout.readline().strip()  # type: ignore[union-attr]
         if not line:
-            raise RuntimeError(f"the emulator printed no port: {self.proc.stderr.read()}")  # type: ignore[union-attr]
+            raise RuntimeError(f"the {self.name} printed no port: {self.proc.stderr.read()}")  # type: ignore[union-attr]
         self.port = line
         self.lines: list[str] = []
         self._thread = threading.Thread(target=self._collect, daemon=True)
@@ -46,7 +46,7 @@ class Emulator:
                 if fragment in line:
                     return line
             time.sleep(0.02)
-        raise AssertionError(f"the emulator never said {fragment!r}; it said:\n{self.text}")
+        raise AssertionError(f"the {self.name} never said {fragment!r}; it said:\n{self.text}")
 
     def stop(self) -> None:
         if self.proc.poll() is None:
@@ -57,6 +57,15 @@ class Emulator:
                 self.proc.kill()
                 self.proc.wait()
         self._thread.join(2)
+
+
+class Emulator(PortProcess):
+    """``pendulab rig-emulator`` in a subprocess."""
+
+    name = "emulator"
+
+    def __init__(self, *args: str) -> None:
+        super().__init__([PYTHON, "-m", "pendulab", "rig-emulator", *args], env=ENV)
 
 
 @contextlib.contextmanager

@@ -19,7 +19,9 @@ pytestmark = [
     pytest.mark.skipif(not twin_available(), reason="needs gcc-avr, avr-libc, simavr, libsimavr-dev (.ci/run installs them)"),
 ]
 
-POKE = "220,0.005,1"
+#: A big poke (a 220 rad/s^2 one makes the demo controller, which does not hold the cart, drift to the track
+#: limit about 12 s later, in simulation as on the rig); 150 keeps the cart within 0.3 m.
+POKE = "150,0.005,1"
 
 
 def _session(out):
