@@ -91,8 +91,10 @@ def run(args: argparse.Namespace) -> int:
         raise CalibrationError("give the rig: --port PORT for the real rig (or 'pendulab rig-emulator'), or --virtual for the virtual rig")
     if args.port and args.friction:
         raise CalibrationError("--friction sets the virtual rig's friction; the real rig has its own (drop --friction or use --virtual)")
-    if args.delay is not None and not 1 <= args.delay <= 8:
-        raise CalibrationError(f"--delay {args.delay} must be 1 to 8 periods")
+    from pendulab.hil.protocol import MAX_DELAY
+
+    if args.delay is not None and not 1 <= args.delay <= MAX_DELAY:
+        raise CalibrationError(f"--delay {args.delay} must be 1 to {MAX_DELAY} periods")
     from pendulab.calibration.rig import VirtualRig
 
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
@@ -113,13 +115,14 @@ def run(args: argparse.Namespace) -> int:
     if args.port:
         from pendulab.hil.link import RigLink
         from pendulab.hil.rig import HilRig
+        from pendulab.hil.protocol import DEFAULT_MAX_DELAY
         from pendulab.hil.session import choose_delay
 
         link = RigLink.open(args.port, args.baud)
         try:
             identity = link.identify()
             print(f"rig at {args.port}: firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, boot id {identity.boot_id:#010x}", flush=True)
-            delay = args.delay or choose_delay(link, 4, announce=lambda text: print(text, flush=True))
+            delay = args.delay or choose_delay(link, DEFAULT_MAX_DELAY, announce=lambda text: print(text, flush=True))
             link.configure(delay=delay, x_limit=0.40)
             print("pendulum removed and cart centred by hand? zeroing the encoders here", flush=True)
             link.zero()

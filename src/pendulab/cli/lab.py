@@ -10,8 +10,8 @@ from pathlib import Path
 
 from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
 from pendulab.errors import UserError
+from pendulab.hil.protocol import DEFAULT_MAX_DELAY
 
-MAX_DELAY_DEFAULT = 4
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_controller_options(parser)
     add_plant_options(parser)
     parser.add_argument("--delay", type=int, metavar="N", help="transport delay in periods (default: measured at connection)")
-    parser.add_argument("--max-delay", type=int, default=MAX_DELAY_DEFAULT, metavar="N", help=f"largest delay to accept when measuring (default {MAX_DELAY_DEFAULT})")
+    parser.add_argument("--max-delay", type=int, default=DEFAULT_MAX_DELAY, metavar="N", help=f"largest delay to accept when measuring (default {DEFAULT_MAX_DELAY})")
     parser.add_argument("--stop-time", type=float, metavar="T", help="end the session by itself T s after streaming starts")
     parser.add_argument("--method", choices=("tustin", "zoh"), default="tustin", help="discretization (default tustin)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="run folder (default: a new folder under runs/)")
@@ -52,10 +52,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.stop_time is not None and not (math.isfinite(args.stop_time) and args.stop_time > 0):
         raise UserError(f"--stop-time {args.stop_time} must be a positive number of seconds")
-    if args.delay is not None and not 1 <= args.delay <= 8:
-        raise UserError(f"--delay {args.delay} must be 1 to 8 periods (the answer to sample k is applied at tick k + N)")
-    if not 1 <= args.max_delay <= 8:
-        raise UserError(f"--max-delay {args.max_delay} must be 1 to 8 periods")
+    from pendulab.hil.protocol import MAX_DELAY
+
+    if args.delay is not None and not 1 <= args.delay <= MAX_DELAY:
+        raise UserError(f"--delay {args.delay} must be 1 to {MAX_DELAY} periods (the answer to sample k is applied at tick k + N)")
+    if not 1 <= args.max_delay <= MAX_DELAY:
+        raise UserError(f"--max-delay {args.max_delay} must be 1 to {MAX_DELAY} periods")
     controller = controller_from_args(args)
     if controller is None:
         if not sys.stdin.isatty():

@@ -15,8 +15,6 @@ from pendulab.errors import UserError
 POKE_DEFAULT = (50.0, 0.005, 1.0)
 #: Longest run in steps (the log is kept in memory): 2000 s at 1 kHz.
 MAX_STEPS = 2_000_000
-#: Longest transport delay, in control periods (the rig protocol's ring holds 8 answers).
-MAX_DELAY = 8
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -78,6 +76,8 @@ def check_run_settings(stop_time: float, step: float, delay: int) -> None:
             f"--stop-time {stop_time:g} s at --step {step:g} s is {stop_time / step:.3g} steps; "
             f"a run has at most {MAX_STEPS:,}: shorten the run or lengthen the step"
         )
+    from pendulab.hil.protocol import MAX_DELAY
+
     if not 0 <= delay <= MAX_DELAY:
         raise UserError(f"--delay {delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
 

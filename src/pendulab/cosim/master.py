@@ -18,7 +18,7 @@ import shutil
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 from fmpy import extract, read_model_description
@@ -182,16 +182,32 @@ class Master:
             shutil.rmtree(d, ignore_errors=True)
         self._tmp_dirs.clear()
 
-    def _initialize(self, start_time: float, stop_time: float) -> None:
-        for name, instance in self.instances.items():
-            instance.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
-            for variable, value in self.system.components[name].start_values.items():
-                instance.set_value(variable, value)
-            try:
-                instance.fmu.enterInitializationMode()
-                instance.fmu.exitInitializationMode()
-            except Exception as exc:  # fmpy raises FMICallException with the status only
-                raise SimulationError(f"{name}: initialization failed ({exc}); check its start values") from exc
+    def initialize(self, start_time: float, stop_time: float | None = None) -> None:
+        """Set every component's start values and initialize it (``run`` does this itself)."""
+        for name in self.instances:
+            self._initialize_component(name, start_time, stop_time)
+
+    def reinitialize(self, name: str, start_time: float, values: Mapping[str, Any] | None = None) -> None:
+        """Reset one component (``fmi2Reset``) and initialize it again at ``start_time``.
+
+        Its start values apply, with ``values`` (e.g. a new initial state) on top. Used where a loop
+        outside :meth:`run` restarts a component: the lab's controller each time it engages, the rig
+        emulator's plant when a hand moves the pendulum.
+        """
+        self.instances[name].fmu.reset()
+        self._initialize_component(name, start_time, None, values)
+
+    def _initialize_component(self, name: str, start_time: float, stop_time: float | None,
+                              values: Mapping[str, Any] | None = None) -> None:
+        instance = self.instances[name]
+        instance.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
+        for variable, value in {**self.system.components[name].start_values, **(values or {})}.items():
+            instance.set_value(variable, value)
+        try:
+            instance.fmu.enterInitializationMode()
+            instance.fmu.exitInitializationMode()
+        except Exception as exc:  # fmpy raises FMICallException with the status only
+            raise SimulationError(f"{name}: initialization failed ({exc}); check its start values") from exc
 
     def _check_wiring(self, record: Sequence[str]) -> None:
         """Every connection joins an output to an input of the same type; recorded names exist."""
@@ -294,7 +310,7 @@ class Master:
             if variable.causality != "input" and not (variable.causality == "parameter" and variable.variability == "tunable"):
                 raise UserError(f"event target {event.target!r} is a {variable.variability} {variable.causality}; an event sets an input")
         self._check_wiring(record)
-        self._initialize(start_time, stop_time)
+        self.initialize(start_time, stop_time)
         plan = _Plan(self, n_steps, record)
         time = start_time + h * np.arange(n_steps + 1)
         reset_after_step: list[tuple[_Instance, str, Any]] = []

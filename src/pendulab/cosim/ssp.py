@@ -15,8 +15,6 @@ Examples
 
 from __future__ import annotations
 
-from pendulab.errors import UserError
-
 import zipfile
 from pathlib import Path
 from typing import BinaryIO
@@ -25,6 +23,7 @@ from xml.sax.saxutils import quoteattr
 from fmpy import read_model_description
 
 from pendulab.cosim.system import System
+from pendulab.errors import UserError
 
 NAMESPACES = (
     'xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '

@@ -34,7 +34,6 @@ from pendulab.model.parameters import PlantParameters
 FIRMWARE_VERSION = (1, 0, 0)
 #: Answers kept for the transport delay (protocol: at least max_delay + 1 slots).
 RING = 16
-MAX_DELAY = 8
 #: The rig's own track limit before the host configures one (m from the zero).
 DEFAULT_TRACK_LIMIT = 0.45
 #: The angle from upright (rad) at which the person holds the pendulum until the controller has it.
@@ -68,35 +67,29 @@ class EmulatorOptions:
 
 
 class _Plant:
-    """Plant.fmu in Co-Simulation with cached C entry points; its state can be set (a hand)."""
+    """Plant.fmu in Co-Simulation with cached C entry points; a hand can set its state (a restart)."""
 
-    def __init__(self, params: PlantParameters, period: float) -> None:
-        from pendulab.cosim.master import _Instance
+    STATE = ("x", "xdot", "alpha", "alphadot")
+
+    def __init__(self, params: PlantParameters, period: float, state: tuple[float, float, float, float]) -> None:
+        from pendulab.cosim.master import Master
+        from pendulab.cosim.system import System
         from pendulab.fmu.build import ensure_fmu
 
-        self._tmp: list[str] = []
-        self.inst = _Instance("rig", ensure_fmu("Plant"), self._tmp)
+        system = System(step=period)
+        system.add("plant", ensure_fmu("Plant"), {**params.as_dict(), **dict(zip(self.STATE, state))})
+        self.master = Master(system)
+        self.master.initialize(0.0)
+        self.inst = self.master.instances["plant"]
         self.params = params
         self.period = period
         self.t = 0.0
         self._v = self.inst.port(["V"])
-        self._state = self.inst.port(["x", "xdot", "alpha", "alphadot", "V_applied"])
-        self._live = False
+        self._state = self.inst.port([*self.STATE, "V_applied"])
 
-    def start(self, t: float, state: tuple[float, float, float, float], **changes: float) -> None:
-        """(Re)initialize at time ``t`` in ``state`` (x, xdot, alpha, alphadot), parameters changed by ``changes``."""
-        fmu = self.inst.fmu
-        if self._live:
-            fmu.reset()
-        fmu.setupExperiment(startTime=t)
-        params = self.params.with_values(**changes) if changes else self.params
-        for name, value in params.as_dict().items():
-            self.inst.set_value(name, value)
-        for name, value in zip(("x", "xdot", "alpha", "alphadot"), state):
-            self.inst.set_value(name, value)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        self._live = True
+    def restart(self, t: float, state: tuple[float, float, float, float], **changes: float) -> None:
+        """Initialize again at time ``t`` in ``state`` (x, xdot, alpha, alphadot), parameters changed by ``changes``."""
+        self.master.reinitialize("plant", t, {**changes, **dict(zip(self.STATE, state))})
         self.t = t
 
     def step(self, voltage: float) -> None:
@@ -111,13 +104,7 @@ class _Plant:
         return tuple(self._state.values["Real"])  # type: ignore[return-value]
 
     def close(self) -> None:
-        import shutil
-
-        try:
-            self.inst.fmu.freeInstance()
-        finally:
-            for d in self._tmp:
-                shutil.rmtree(d, ignore_errors=True)
+        self.master.close()
 
 
 class RigEmulator:
@@ -130,7 +117,8 @@ class RigEmulator:
         self.rng = random.Random(options.seed)
         self.announce_line = announce or (lambda text: print(text, file=sys.stderr, flush=True))
         params = options.params.with_values(q_alpha=0.0, q_x=0.0, poke_magnitude=0.0)
-        self.plant = _Plant(params, options.period)
+        # The pendulum hangs at rest, the cart at the centre.
+        self.plant = _Plant(params, options.period, (0.0, 0.0, math.pi, 0.0))
         self.counts_per_m = 1.0 / options.cart_step
         self.counts_per_rad = options.pendulum_counts_per_rev / (2 * math.pi)
         self.fd: int | None = None
@@ -144,8 +132,6 @@ class RigEmulator:
         self.held = False
         self.raised = False
         self._boot()
-        # The pendulum hangs at rest, the cart at the centre.
-        self.plant.start(0.0, (0.0, 0.0, math.pi, 0.0))
 
     # ------------------------------------------------------------------ set-up
     def _boot(self) -> None:
@@ -294,10 +280,10 @@ class RigEmulator:
             self.send(P.Identity(
                 self._next_seq(), P.PROTOCOL_VERSION, *FIRMWARE_VERSION, self.boot_id, self.period_us,
                 self.counts_per_m, self.counts_per_rad, self.v_max_mv, self.x_min, self.x_max,
-                self.watchdog_ms, MAX_DELAY, 16,
+                self.watchdog_ms, P.MAX_DELAY, 16,
             ))
         elif isinstance(frame, P.Configure):
-            ok = (frame.period_us == self.period_us and 1 <= frame.watchdog_ms <= 60000 and 1 <= frame.delay <= MAX_DELAY
+            ok = (frame.period_us == self.period_us and 1 <= frame.watchdog_ms <= 60000 and 1 <= frame.delay <= P.MAX_DELAY
                   and frame.x_min < frame.x_max and 0 < frame.v_max_mv <= 10000)
             if ok:
                 self.watchdog_ms, self.delay = frame.watchdog_ms, frame.delay
@@ -387,10 +373,9 @@ class RigEmulator:
                 self._disable("the host disabled the amplifier")
         # The second, independent safety layer: watchdog and track limits.
         self._check_watchdog(now)
-        full_cart = cart
-        if not self.limit_hit and not (self.x_min <= full_cart <= self.x_max):
+        if not self.limit_hit and not (self.x_min <= cart <= self.x_max):
             self.limit_hit = True
-            self._disable(f"track limit hit at x = {full_cart / self.counts_per_m:+.3f} m -> 0 V")
+            self._disable(f"track limit hit at x = {cart / self.counts_per_m:+.3f} m -> 0 V")
         if self.wd_tripped or self.limit_hit or self.fault:
             self.enabled, self.voltage = False, 0.0
         if self.enabled and self.held and self.voltage != 0.0:
@@ -420,7 +405,7 @@ class RigEmulator:
             self.say(f"hand released, the controller has the pendulum; poke {mag:g} rad/s^2 for {dur:g} s at t = {self.plant.t + start:.3f} s")
         else:
             self.say("hand released, the controller has the pendulum")
-        self.plant.start(self.plant.t, (x, xdot, HOLD_ANGLE, 0.0), **changes)
+        self.plant.restart(self.plant.t, (x, xdot, HOLD_ANGLE, 0.0), **changes)
         self.held = False
 
     # ------------------------------------------------------------------ the loop

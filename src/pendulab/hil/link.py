@@ -113,15 +113,10 @@ class RigLink:
 
     def next_sample(self, timeout: float) -> tuple[P.Sample, float] | None:
         """The next SAMPLE (other frames in between are dropped), or None after ``timeout``."""
-        deadline = time.perf_counter() + timeout
-        while True:
-            item = self.next_frame(max(0.0, deadline - time.perf_counter()))
-            if item is None:
-                return None
-            if isinstance(item[0], P.Sample):
-                return item  # type: ignore[return-value]
+        return self.expect(P.Sample, timeout)  # type: ignore[return-value]
 
-    def _expect(self, kind: type[P.Frame], timeout: float) -> tuple[P.Frame, float] | None:
+    def expect(self, kind: type[P.Frame], timeout: float) -> tuple[P.Frame, float] | None:
+        """The next frame of type ``kind`` (others in between are dropped), or None after ``timeout``."""
         deadline = time.perf_counter() + timeout
         while True:
             item = self.next_frame(max(0.0, deadline - time.perf_counter()))
@@ -137,7 +132,7 @@ class RigLink:
             pass
         before = self.bytes_in
         self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
-        item = self._expect(P.Identity, timeout)
+        item = self.expect(P.Identity, timeout)
         if item is None:
             if self.bytes_in > before:
                 raise UserError(
@@ -163,7 +158,7 @@ class RigLink:
         for _ in range(count):
             start = time.perf_counter()
             self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
-            item = self._expect(P.Identity, timeout)
+            item = self.expect(P.Identity, timeout)
             if item is not None:
                 out.append(item[1] - start)
         return out
@@ -171,12 +166,11 @@ class RigLink:
     def _acked(self, kind: type[P.Frame], timeout: float = 0.5) -> P.Ack:
         deadline = time.perf_counter() + timeout
         while True:
-            item = self.next_frame(max(0.0, deadline - time.perf_counter()))
+            item = self.expect(P.Ack, max(0.0, deadline - time.perf_counter()))
             if item is None:
                 raise LinkLost(f"link lost: the rig at {self.name} did not acknowledge {kind.__name__.upper()} within {timeout:g} s")
-            frame = item[0]
-            if isinstance(frame, P.Ack) and frame.acked == kind.TYPE:
-                return frame
+            if item[0].acked == kind.TYPE:  # type: ignore[attr-defined]
+                return item[0]  # type: ignore[return-value]
 
     def configure(self, *, delay: int, watchdog_ms: int = 20, x_limit: float | None = None, v_max: float = 10.0) -> None:
         identity = self.identity

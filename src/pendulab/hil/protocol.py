@@ -22,6 +22,10 @@ from typing import ClassVar, Union
 PROTOCOL_VERSION = 1
 #: 1 Mbaud: exact from a 16 MHz AVR clock (921600 is 8 % off there), and >= 921600 as the lab needs.
 DEFAULT_BAUD = 1_000_000
+#: Largest transport delay N (periods) a CONFIGURE may ask for (docs/protocol.md, section 3).
+MAX_DELAY = 8
+#: The longest delay the host accepts when it measures the link, unless told otherwise (a USB bridge needs 2-3).
+DEFAULT_MAX_DELAY = 4
 #: Longest decoded frame a reader stores; anything longer is rejected unread.
 MAX_FRAME = 64
 

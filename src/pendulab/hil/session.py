@@ -139,19 +139,25 @@ class LabSession:
     def _wire(self, master: Master) -> None:
         """Ports and copy lists from the system's connections; the rig stands in for ``plant``."""
         self.order = [name for name in self.system.components if name != RIG]
-        self.inputs: dict[str, tuple[_Port, list[tuple[str, str, Callable[[float], float] | None]]]] = {}
-        self.outputs: dict[str, tuple[_Port, list[str]]] = {}
+        # Each input and output with its place in its port's buffers, found once (not per sample).
+        Slot = tuple[str, str, int]  # "component.variable", base type, index in the port's buffer
+        self.inputs: dict[str, tuple[_Port, list[tuple[Slot, Callable[[float], float] | None]]]] = {}
+        self.outputs: dict[str, tuple[_Port, list[Slot]]] = {}
         for name in self.order:
             inst = master.instances[name]
             conns = [c for c in self.system.connections if c.target == name]
-            wiring = [(f"{c.source}.{c.source_variable}", c.target_variable,
-                       RIG_ADAPTERS.get((f"{c.source}.{c.source_variable}", f"{c.target}.{c.target_variable}"))) for c in conns]
-            self.inputs[name] = (inst.port([w[1] for w in wiring]), wiring)
+            port = inst.port([c.target_variable for c in conns])
+            self.inputs[name] = (port, [
+                ((f"{c.source}.{c.source_variable}", *port.index(c.target_variable)),
+                 RIG_ADAPTERS.get((f"{c.source}.{c.source_variable}", f"{c.target}.{c.target_variable}")))
+                for c in conns
+            ])
             needed = [c.source_variable for c in self.system.connections if c.source == name]
             if name == "supervisor":
                 needed += ["state", "trip_reason", "motor_enable"]
             needed = list(dict.fromkeys(needed))
-            self.outputs[name] = (inst.port(needed), needed)
+            out = inst.port(needed)
+            self.outputs[name] = (out, [(f"{name}.{var}", *out.index(var)) for var in needed])
         to_rig = [c for c in self.system.connections if c.target == RIG]
         if len(to_rig) != 1 or to_rig[0].target_variable != "V":
             raise UserError("the lab's wiring needs exactly one connection into plant.V")
@@ -162,26 +168,14 @@ class LabSession:
         for name in self.order:
             inst = master.instances[name]
             port, wiring = self.inputs[name]
-            for source, target, adapt in wiring:
+            for (source, t, i), adapt in wiring:
                 value = values[source]
-                t, i = port.index(target)
                 port.values[t][i] = adapt(value) if adapt else value
             inst.write(port)
-            out, names = self.outputs[name]
+            out, slots = self.outputs[name]
             inst.read(out)
-            for var in names:
-                t, i = out.index(var)
-                values[f"{name}.{var}"] = out.values[t][i]
-
-    def _reset_controller(self, master: Master, t: float) -> None:
-        """The controller starts from a reset state each time it engages."""
-        inst = master.instances["controller"]
-        inst.fmu.reset()
-        inst.fmu.setupExperiment(startTime=t)
-        for variable, value in self.system.components["controller"].start_values.items():
-            inst.set_value(variable, value)
-        inst.fmu.enterInitializationMode()
-        inst.fmu.exitInitializationMode()
+            for path, t, i in slots:
+                values[path] = out.values[t][i]
 
     # ------------------------------------------------------------------ the loop
     def run(self) -> tuple[str, int]:
@@ -198,7 +192,7 @@ class LabSession:
         last_seq = 0
         master = Master(sub)
         try:
-            master._initialize(0.0, self.stop_time or 1e9)
+            master.initialize(0.0, self.stop_time)
             self._wire(master)
             sup, ctrl = master.instances["supervisor"], master.instances["controller"]
             encoders = Encoders(self.identity)
@@ -273,7 +267,8 @@ class LabSession:
                         why = f" ({TRIP_REASONS.get(int(values['supervisor.trip_reason']), '?')})"
                     self.announce(f"[{t:8.3f} s] {STATES.get(new_state, new_state)}{why}")
                     if state == RUNNING and new_state != RUNNING:
-                        self._reset_controller(master, t)
+                        # The controller starts from a reset state each time it engages.
+                        master.reinitialize("controller", t)
                     state = new_state
                 if sample.status & P.ST_FAULT:
                     raise RigFault("the rig reports a fault (amplifier or encoder); check the rig")
@@ -317,7 +312,7 @@ class LabSession:
         """Samples stopped: a restarted rig answers with a new boot id; a dead link does not answer."""
         old = self.identity
         self.link.send(P.Identify, protocol=P.PROTOCOL_VERSION)
-        item = self.link._expect(P.Identity, 0.3)
+        item = self.link.expect(P.Identity, 0.3)
         if item is None:
             raise LinkLost(f"link lost: no data from the rig for {SILENCE * 1e3 + 300:.0f} ms")
         identity = item[0]
