@@ -30,15 +30,10 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli import pendulab_script  # noqa: E402 - the same console script the CLI bench starts
+
 BAR_S = 3.0
-
-
-def pendulab_script() -> list[str]:
-    script = Path(sys.executable).with_name("pendulab")
-    if script.exists():
-        return [str(script)]
-    found = shutil.which("pendulab")
-    return [found] if found else [sys.executable, "-m", "pendulab"]
 
 
 def python_start(code: str) -> float:
