@@ -53,6 +53,14 @@ def plant_unzipdir(plant_fmu: Path, tmp_path_factory: pytest.TempPathFactory) ->
 
 
 @pytest.fixture(scope="session")
+def plant3_fmu() -> Path:
+    """Path of ``fmus/Plant3.fmu`` (the plant as an FMI 3.0 FMU), built first if missing or out of date."""
+    from pendulab.fmu.build import ensure_fmu
+
+    return ensure_fmu("Plant3")
+
+
+@pytest.fixture(scope="session")
 def controller_fmu() -> Path:
     """Path of ``fmus/Controller.fmu``, built first if it is missing or older than its sources."""
     from pendulab.fmu.build import ensure_fmu

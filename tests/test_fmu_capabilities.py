@@ -1,4 +1,5 @@
-"""Every capability flag of the three modelDescriptions, checked against what the FMU does (issue 12)."""
+"""Every capability flag of the FMUs' modelDescriptions, checked against what the FMU does (issue 12);
+the FMI 3.0 plant (Plant3, issue 11) through fmpy's FMI 3.0 classes."""
 
 from __future__ import annotations
 
@@ -12,30 +13,45 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Model, FMU2Slave
+from fmpy.fmi3 import FMU3Model, FMU3Slave
 
 BIN = Path(sys.executable).parent
 
 
-def slave(fmu: Path, tmp_path: Path, start: dict[str, float] | None = None) -> tuple[FMU2Slave, dict[str, int]]:
+def is_fmi3(md) -> bool:  # noqa: ANN001 - fmpy's ModelDescription
+    return md.fmiVersion.startswith("3.")
+
+
+def initialize(fmu, md, start: dict[str, float] | None = None) -> dict[str, int]:  # noqa: ANN001 - fmpy FMU objects
+    """Initialization mode with ``start`` set, in either FMI version's calls."""
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    types = {v.name: v.type for v in md.modelVariables}
+    if is_fmi3(md):
+        fmu.enterInitializationMode(startTime=0.0)
+    else:
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+    for name, value in (start or {}).items():
+        if types[name] in ("Integer", "Int32"):
+            (fmu.setInt32 if is_fmi3(md) else fmu.setInteger)([refs[name]], [int(value)])
+        else:
+            (fmu.setFloat64 if is_fmi3(md) else fmu.setReal)([refs[name]], [value])
+    fmu.exitInitializationMode()
+    return refs
+
+
+def slave(fmu: Path, tmp_path: Path, start: dict[str, float] | None = None) -> tuple[FMU2Slave | FMU3Slave, dict[str, int]]:
     md = read_model_description(str(fmu))
     unzipdir = extract(str(fmu), str(tmp_path / fmu.stem))
-    s = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="i")
+    cls = FMU3Slave if is_fmi3(md) else FMU2Slave
+    s = cls(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="i")
     s.instantiate()
-    refs = {v.name: v.valueReference for v in md.modelVariables}
-    s.setupExperiment(startTime=0.0)
-    s.enterInitializationMode()
-    for name, value in (start or {}).items():
-        if md.modelVariables[[v.name for v in md.modelVariables].index(name)].type == "Integer":
-            s.setInteger([refs[name]], [int(value)])
-        else:
-            s.setReal([refs[name]], [value])
-    s.exitInitializationMode()
-    return s, refs
+    return s, initialize(s, md, start)
 
 
-@pytest.fixture(params=["plant", "controller", "supervisor"])
-def any_fmu(request, plant_fmu, controller_fmu, supervisor_fmu) -> Path:
-    return {"plant": plant_fmu, "controller": controller_fmu, "supervisor": supervisor_fmu}[request.param]
+@pytest.fixture(params=["plant", "controller", "supervisor", "plant3"])
+def any_fmu(request, plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu) -> Path:
+    return {"plant": plant_fmu, "controller": controller_fmu, "supervisor": supervisor_fmu, "plant3": plant3_fmu}[request.param]
 
 
 def test_fmpy_validate_is_clean(any_fmu):
@@ -73,23 +89,22 @@ def test_default_experiment_step_is_accepted(any_fmu, tmp_path):
 
 def test_model_exchange_offered_only_where_it_works(any_fmu, tmp_path):
     """An FMU without ModelExchange in its description refuses to be instantiated as one; the plant's
-    declared number of event indicators is what fmi2GetEventIndicators delivers, and they change sign."""
+    declared number of event indicators is what fmi2GetEventIndicators (fmi3GetEventIndicators) delivers,
+    and they change sign."""
     md = read_model_description(str(any_fmu))
     unzipdir = extract(str(any_fmu), str(tmp_path / "me"))
     identifier = md.coSimulation.modelIdentifier
-    model = FMU2Model(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=identifier, instanceName="m")
+    cls = FMU3Model if is_fmi3(md) else FMU2Model
+    model = cls(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=identifier, instanceName="m")
     if md.modelExchange is None:
         with pytest.raises(Exception):
             model.instantiate()
         return
     model.instantiate()
-    model.setupExperiment(startTime=0.0)
-    model.enterInitializationMode()
-    refs = {v.name: v.valueReference for v in md.modelVariables}
-    model.setReal([refs["alpha"], refs["xdot"]], [np.pi, 0.3])  # cart coasting out of the stick band
-    model.exitInitializationMode()
-    model.newDiscreteStates()
+    initialize(model, md, {"alpha": np.pi, "xdot": 0.3})  # cart coasting out of the stick band
+    (model.updateDiscreteStates if is_fmi3(md) else model.newDiscreteStates)()
     model.enterContinuousTimeMode()
+    get_derivatives = model.getContinuousStateDerivatives if is_fmi3(md) else model.getDerivatives
     nz = md.numberOfEventIndicators
     assert nz > 0
     z = (ctypes.c_double * nz)()
@@ -104,7 +119,7 @@ def test_model_exchange_offered_only_where_it_works(any_fmu, tmp_path):
     changed = False
     for _ in range(2000):
         t += 1e-4
-        model.getDerivatives(dx, 4)
+        get_derivatives(dx, 4)
         for k in range(4):
             x[k] += 1e-4 * dx[k]
         model.setTime(t)

@@ -2,6 +2,7 @@
 
 One plain C host (tests/hosts/fmu_host.c) is built natively and with mingw-w64; each runs the same
 reference cases (the plant's open-loop case, plant and controller in a loop) on its platform's binaries.
+The FMI 3.0 plant (Plant3) is in the platform and import checks; the host speaks FMI 2.0 only.
 """
 
 from __future__ import annotations
@@ -21,20 +22,28 @@ from pendulab.fmu.build import FMI_HEADERS, WIN64_COMPILER
 HOST = Path(__file__).parent / "hosts" / "fmu_host.c"
 WINE = shutil.which("wine64") or ("/usr/lib/wine/wine64" if Path("/usr/lib/wine/wine64").exists() else None)
 SUFFIX = {"linux64": ".so", "win64": ".dll"}
+#: FMI 3.0 names the same two platforms by architecture and system.
+SUFFIX3 = {"x86_64-linux": ".so", "x86_64-windows": ".dll"}
 
 
-def test_every_fmu_carries_both_platforms(plant_fmu, controller_fmu, supervisor_fmu):
+def binaries(fmu: Path) -> dict[str, str]:
+    """Platform folder -> the binary's path in the FMU, for the FMU's FMI version."""
+    suffixes = SUFFIX3 if read_model_description(str(fmu)).fmiVersion.startswith("3.") else SUFFIX
+    return {platform_dir: f"binaries/{platform_dir}/{fmu.stem}{suffix}" for platform_dir, suffix in suffixes.items()}
+
+
+def test_every_fmu_carries_both_platforms(plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu):
     """A missing binary for either platform fails here (an FMU built without mingw-w64 has no win64)."""
-    for fmu in (plant_fmu, controller_fmu, supervisor_fmu):
+    for fmu in (plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu):
         names = set(zipfile.ZipFile(fmu).namelist())
-        for platform_dir, suffix in SUFFIX.items():
-            assert f"binaries/{platform_dir}/{fmu.stem}{suffix}" in names, (fmu.name, platform_dir)
+        for platform_dir, path in binaries(fmu).items():
+            assert path in names, (fmu.name, platform_dir)
 
 
-def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supervisor_fmu, tmp_path):
-    for fmu in (plant_fmu, controller_fmu, supervisor_fmu):
+def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu, tmp_path):
+    for fmu in (plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu):
         dll = tmp_path / f"{fmu.stem}.dll"
-        dll.write_bytes(zipfile.ZipFile(fmu).read(f"binaries/win64/{fmu.stem}.dll"))
+        dll.write_bytes(zipfile.ZipFile(fmu).read([p for p in binaries(fmu).values() if p.endswith(".dll")][0]))
         dump = subprocess.run(["x86_64-w64-mingw32-objdump", "-p", str(dll)], capture_output=True, text=True, check=True).stdout
         imports = {line.split(":")[1].strip().lower() for line in dump.splitlines() if "DLL Name:" in line}
         assert imports == {"kernel32.dll", "msvcrt.dll"}, (fmu.name, imports)

@@ -1,5 +1,8 @@
 """Build pendulab's native FMUs: shared wrapper + one model folder -> ``fmus/<Name>.fmu``.
 
+The FMI 2.0 FMUs (Plant, Controller, Supervisor) use ``c/fmi2_wrapper.c``; the FMI 3.0 ones
+(:data:`~pendulab.fmu.models.FMI3_MODELS`, e.g. Plant3) the same model folder with ``c/fmi3_wrapper.c``.
+
 Examples
 --------
 >>> from pendulab.fmu.build import ensure_fmu
@@ -8,6 +11,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib
 import os
@@ -24,7 +28,7 @@ import fmpy
 
 from pendulab.errors import FmuBuildError
 from pendulab.fmu.description import ModelSpec, model_description_xml, variables_header
-from pendulab.fmu.models import MODELS
+from pendulab.fmu.models import ALL_FMUS, FMI3_MODELS, MODELS
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 WRAPPER_DIR = Path(__file__).resolve().parent / "c"
@@ -32,6 +36,10 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 FMI_HEADERS = Path(fmpy.__file__).resolve().parent / "c-code"
 WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
 _STAMP = "pendulab-build "
+#: The wrapper of each FMI version, and its binaries' platform folders (native Linux, win64).
+WRAPPERS = {2: "fmi2_wrapper.c", 3: "fmi3_wrapper.c"}
+PLATFORM_DIRS = {2: {"Linux": "linux64", "Darwin": "darwin64", "Windows": "win64"},
+                 3: {"Linux": "x86_64-linux", "Darwin": "x86_64-darwin", "Windows": "x86_64-windows"}}
 
 
 def default_fmu_dir() -> Path:
@@ -58,22 +66,33 @@ def source_hash() -> str:
 
 
 def model_spec(name: str) -> ModelSpec:
+    """The spec of FMU ``name``; an FMI 3.0 FMU is its model's spec under its own identifier."""
+    if name in FMI3_MODELS:
+        spec = model_spec(FMI3_MODELS[name])
+        return dataclasses.replace(spec, identifier=name, fmi_version=3, description=f"{spec.description} (FMI 3.0)")
     if name not in MODELS:
-        raise FmuBuildError(f"unknown FMU {name!r}; known ones are {', '.join(MODELS)}")
+        raise FmuBuildError(f"unknown FMU {name!r}; known ones are {', '.join(ALL_FMUS)}")
     return importlib.import_module(MODELS[name]).spec()
 
 
-def _platform_dir() -> str:
-    machine = "64" if sys.maxsize > 2**32 else "32"
-    return {"Linux": f"linux{machine}", "Darwin": "darwin64", "Windows": f"win{machine}"}[platform.system()]
+def model_dir(name: str) -> Path:
+    """The model folder an FMU is built from (an FMI 3.0 FMU shares its FMI 2.0 model's)."""
+    return MODELS_DIR / FMI3_MODELS.get(name, name).lower()
+
+
+def platform_dir(fmi_version: int = 2, system: str | None = None) -> str:
+    """The ``binaries/`` folder of this platform (or ``system``'s, 64 bit) for an FMU of ``fmi_version``."""
+    if sys.maxsize <= 2**32 and fmi_version == 2:
+        return {"Linux": "linux32", "Windows": "win32"}[system or platform.system()]
+    return PLATFORM_DIRS[fmi_version][system or platform.system()]
 
 
 def _compile(compiler: str, sources: list[Path], include_dirs: list[Path], output: Path, windows: bool) -> None:
     flags = ["-shared", "-O2", "-std=c99", "-fno-math-errno"]
     if not windows:
         flags.append("-fPIC")
-        if any(s.name == "fmi2_wrapper.c" for s in sources):
-            # An FMU exports only the FMI API (marked by fmi2Functions.h). Hidden internals are also called
+        if any(s.name in WRAPPERS.values() for s in sources):
+            # An FMU exports only the FMI API (marked by fmi2Functions.h / fmi3Functions.h). Hidden internals are also called
             # directly instead of through the PLT, and can be inlined: the plant's step is ~30 % faster.
             flags.append("-fvisibility=hidden")
     else:
@@ -85,11 +104,12 @@ def _compile(compiler: str, sources: list[Path], include_dirs: list[Path], outpu
 
 
 def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = True) -> Path:
-    """Build ``<out_dir>/<name>.fmu`` (FMI 2.0, native binary, with ``sources/``).
+    """Build ``<out_dir>/<name>.fmu`` (native binary, win64 where possible, with ``sources/``).
 
     Parameters
     ----------
-    name : {"Plant", "Controller", "Supervisor"}
+    name : {"Plant", "Controller", "Supervisor", "Plant3"}
+        Plant3 is the plant as an FMI 3.0 FMU; the others are FMI 2.0.
     out_dir : Path, optional
         Default :func:`default_fmu_dir`.
     cross_compile : bool
@@ -101,31 +121,31 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
     if not compiler:
         raise FmuBuildError("no C compiler found: install gcc (e.g. 'apt-get install gcc') to build the FMUs")
     spec = model_spec(name)
-    model_dir = MODELS_DIR / name.lower()
+    wrapper = WRAPPERS[spec.fmi_version]
     with tempfile.TemporaryDirectory(prefix=f"pendulab-{name}-") as tmp:
         root = Path(tmp) / "fmu"
         sources_dir = root / "sources"
         sources_dir.mkdir(parents=True)
-        for path in WRAPPER_DIR.iterdir():
-            shutil.copy(path, sources_dir / path.name)
-        for path in model_dir.iterdir():
+        for filename in ("fmu_model.h", wrapper):
+            shutil.copy(WRAPPER_DIR / filename, sources_dir / filename)
+        for path in model_dir(name).iterdir():
             if path.suffix in (".c", ".h"):
                 shutil.copy(path, sources_dir / path.name)
         for filename, text in spec.generated.items():
             (sources_dir / filename).write_text(text)
         (sources_dir / "variables.h").write_text(variables_header(spec))
-        c_files = ["fmi2_wrapper.c", *spec.sources]
+        c_files = [wrapper, *spec.sources]
         (root / "modelDescription.xml").write_text(model_description_xml(spec, c_files))
         (sources_dir / "buildDescription.xml").write_text(_build_description(spec.identifier, c_files))
 
         binaries = root / "binaries"
         suffix = {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}[platform.system()]
-        native = binaries / _platform_dir() / f"{spec.identifier}{suffix}"
+        native = binaries / platform_dir(spec.fmi_version) / f"{spec.identifier}{suffix}"
         native.parent.mkdir(parents=True)
         sources = [sources_dir / f for f in c_files]
         _compile(compiler, sources, [sources_dir, FMI_HEADERS], native, windows=platform.system() == "Windows")
         if cross_compile and platform.system() != "Windows" and shutil.which(WIN64_COMPILER):
-            win = binaries / "win64" / f"{spec.identifier}.dll"
+            win = binaries / platform_dir(spec.fmi_version, "Windows") / f"{spec.identifier}.dll"
             win.parent.mkdir(parents=True)
             _compile(WIN64_COMPILER, sources, [sources_dir, FMI_HEADERS], win, windows=True)
 
@@ -185,7 +205,8 @@ def is_current(path: Path) -> bool:
             if zf.comment.decode(errors="replace") != _STAMP + source_hash():
                 return False
             wants_win64 = platform.system() != "Windows" and shutil.which(WIN64_COMPILER) is not None
-            return not wants_win64 or any(n.startswith("binaries/win64/") for n in zf.namelist())
+            win64 = {f"binaries/{platform_dir(v, 'Windows')}/" for v in PLATFORM_DIRS}
+            return not wants_win64 or any(n.startswith(tuple(win64)) for n in zf.namelist())
     except (OSError, zipfile.BadZipFile):
         return False
 
@@ -207,7 +228,7 @@ def build_all(out_dir: Path | None = None, names: Iterable[str] | None = None, *
     if platform.system() != "Windows" and shutil.which(WIN64_COMPILER) is None:
         progress(f"no win64 binaries: the mingw-w64 cross compiler ({WIN64_COMPILER}) is not installed "
                  "(apt-get install gcc-mingw-w64-x86-64); building for this platform only")
-    for name in names or MODELS:
+    for name in names or ALL_FMUS:
         progress(f"building {name}.fmu")
         paths.append(build_fmu(name, out_dir))
     return paths

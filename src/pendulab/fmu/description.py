@@ -1,8 +1,13 @@
 """Small data classes that describe an FMU's variables, and the two files written from them.
 
 One variable table per model (in ``pendulab/fmu/models/<name>/config.py``) produces both the
-``modelDescription.xml`` and the C header ``variables.h`` with the value references, so the two can
-never disagree.
+``modelDescription.xml`` (FMI 2.0 or FMI 3.0) and the C header ``variables.h`` with the value references,
+so the two can never disagree.
+
+FMI 3.0 value references are unique across types; they are the FMI 2.0 ones shifted per type, in the
+order Float64 (= Real), Int32 (= Integer), Boolean, then ``time`` and the event indicators (FMI 3.0
+declares each event indicator as a variable). :meth:`ModelSpec.value_references_fmi3` gives them, and
+``variables.h`` carries the offsets (``VR3_...``) that ``fmi3_wrapper.c`` maps back.
 
 Examples
 --------
@@ -83,6 +88,10 @@ class ModelSpec:
     event_indicators: int = 0
     #: canHandleVariableCommunicationStepSize: False if doStep accepts only ``default_step``.
     variable_step: bool = True
+    #: Names of the event indicators (FMI 3.0 declares each as a variable); default ``z1``, ``z2``, ...
+    event_indicator_names: Sequence[str] = ()
+    #: FMI version of the FMU built from this spec: 2 (``fmi2_wrapper.c``) or 3 (``fmi3_wrapper.c``).
+    fmi_version: int = 2
 
     @property
     def model_exchange(self) -> bool:
@@ -100,6 +109,30 @@ class ModelSpec:
     def count(self, base_type: str) -> int:
         return sum(v.type == base_type for v in self.variables)
 
+    def indicator_names(self) -> list[str]:
+        names = list(self.event_indicator_names) or [f"z{k + 1}" for k in range(self.event_indicators)]
+        if len(names) != self.event_indicators:
+            raise ValueError(f"{self.identifier}: {len(names)} event indicator names for {self.event_indicators} indicators")
+        return names
+
+    def fmi3_offsets(self) -> dict[str, int]:
+        """First FMI 3.0 value reference of each group (see the module docstring)."""
+        offsets, next_ref = {}, 0
+        for group, size in (("Real", self.count("Real")), ("Integer", self.count("Integer")),
+                            ("Boolean", self.count("Boolean")), ("time", 1), ("indicators", self.event_indicators)):
+            offsets[group] = next_ref
+            next_ref += size
+        return offsets
+
+    def value_references_fmi3(self) -> dict[str, int]:
+        """FMI 3.0 value references (unique across types), including ``time`` and the event indicators."""
+        offsets = self.fmi3_offsets()
+        refs = {v.name: offsets[v.type] + ref for v, ref in zip(self.variables, self.value_references().values())}
+        refs["time"] = offsets["time"]
+        for k, name in enumerate(self.indicator_names()):
+            refs[f"event_indicator.{name}"] = offsets["indicators"] + k
+        return refs
+
     @property
     def guid(self) -> str:
         """A GUID that changes whenever the variables or the generated code change."""
@@ -108,6 +141,8 @@ class ModelSpec:
             digest.update(repr(v).encode())
         for name in sorted(self.generated):
             digest.update(name.encode() + self.generated[name].encode())
+        if self.fmi_version != 2:  # FMI 2.0 GUIDs stay as they were before FMI 3.0 existed
+            digest.update(f"fmi{self.fmi_version}".encode())
         return "{" + str(uuid.UUID(bytes=digest.digest()[:16])) + "}"
 
 
@@ -120,7 +155,9 @@ def _literal(value: float | int | bool) -> str:
 
 
 def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
-    """The ``modelDescription.xml`` text (FMI 2.0)."""
+    """The ``modelDescription.xml`` text (FMI 2.0, or FMI 3.0 if ``spec.fmi_version == 3``)."""
+    if spec.fmi_version == 3:
+        return model_description_fmi3_xml(spec)
     refs = spec.value_references()
     index = {v.name: k + 1 for k, v in enumerate(spec.variables)}
     units = sorted({v.unit for v in spec.variables if v.unit})
@@ -189,20 +226,95 @@ def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
         lines.append("    <Derivatives>")
         lines += [f'      <Unknown index="{index[v.name]}"/>' for v in derivatives]
         lines.append("    </Derivatives>")
-    initial_unknowns = [
+    initial_unknowns = _initial_unknowns(spec)
+    if initial_unknowns:
+        lines.append("    <InitialUnknowns>")
+        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in initial_unknowns]
+        lines.append("    </InitialUnknowns>")
+    lines.append("  </ModelStructure>")
+    lines.append("</fmiModelDescription>")
+    return "\n".join(lines) + "\n"
+
+
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
+
+
+def model_description_fmi3_xml(spec: ModelSpec) -> str:
+    """The FMI 3.0 ``modelDescription.xml`` text from the same variable table as the FMI 2.0 one.
+
+    Model Exchange (where the model has states) and Co-Simulation in one FMU. FMI 3.0 has no source file
+    list here: ``sources/buildDescription.xml`` lists them.
+    """
+    refs = spec.value_references_fmi3()
+    units = sorted({v.unit for v in spec.variables if v.unit} | {"s"})
+    indicators = [f"event_indicator.{n}" for n in spec.indicator_names()] if spec.model_exchange else []
+    lines = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        "<fmiModelDescription",
+        '  fmiVersion="3.0"',
+        f"  modelName={quoteattr(spec.identifier)}",
+        f'  instantiationToken="{spec.guid}"',
+        f"  description={quoteattr(spec.description)}",
+        f'  generationTool="{GENERATOR}"',
+        '  variableNamingConvention="structured">',
+    ]
+    if spec.model_exchange:
+        lines.append(f'  <ModelExchange modelIdentifier="{spec.identifier}"/>')
+    lines.append(
+        f'  <CoSimulation modelIdentifier="{spec.identifier}"'
+        f' canHandleVariableCommunicationStepSize="{_literal(spec.variable_step)}"/>'
+    )
+    lines.append("  <UnitDefinitions>")
+    lines += [f"    <Unit name={quoteattr(u)}/>" for u in units]
+    lines.append("  </UnitDefinitions>")
+    lines.append("  <LogCategories>")
+    lines.append('    <Category name="logStatusError" description="Errors"/>')
+    lines.append('    <Category name="logEvents" description="State changes and events"/>')
+    lines.append("  </LogCategories>")
+    lines.append(f'  <DefaultExperiment startTime="0" stopTime="10" stepSize="{spec.default_step!r}"/>')
+    lines.append("  <ModelVariables>")
+    lines.append(f'    <Float64 name="time" valueReference="{refs["time"]}" causality="independent" variability="continuous"'
+                 ' description="Simulation time" unit="s"/>')
+    for v in spec.variables:
+        attrs = [f"name={quoteattr(v.name)}", f'valueReference="{refs[v.name]}"']
+        if v.description:
+            attrs.append(f"description={quoteattr(v.description)}")
+        attrs.append(f'causality="{v.causality}"')
+        attrs.append(f'variability="{v.resolved_variability}"')
+        if v.initial:
+            attrs.append(f'initial="{v.initial}"')
+        if v.unit and v.type == "Real":
+            attrs.append(f"unit={quoteattr(v.unit)}")
+        if v.derivative_of:
+            attrs.append(f'derivative="{refs[v.derivative_of]}"')
+        if v.start is not None:
+            if isinstance(v.start, float) and not math.isfinite(v.start):
+                raise ValueError(f"start value of {v.name} must be finite")
+            attrs.append(f'start="{_literal(v.start)}"')
+        lines.append(f"    <{_FMI3_TYPES[v.type]} {' '.join(attrs)}/>")
+    for name, short in zip(indicators, spec.indicator_names()):
+        lines.append(f"    <Float64 name={quoteattr(name)} valueReference=\"{refs[name]}\" causality=\"local\" variability=\"continuous\""
+                     f" description={quoteattr(f'Event indicator {short}: changes sign where the right-hand side switches')}/>")
+    lines.append("  </ModelVariables>")
+    lines.append("  <ModelStructure>")
+    lines += [f'    <Output valueReference="{refs[v.name]}"/>' for v in spec.variables if v.causality == "output"]
+    lines += [f'    <ContinuousStateDerivative valueReference="{refs[v.name]}"/>' for v in spec.variables if v.derivative_of]
+    lines += [f'    <InitialUnknown valueReference="{refs[v.name]}"/>' for v in _initial_unknowns(spec)]
+    lines += [f'    <EventIndicator valueReference="{refs[name]}"/>' for name in indicators]
+    lines.append("  </ModelStructure>")
+    lines.append("</fmiModelDescription>")
+    return "\n".join(lines) + "\n"
+
+
+def _initial_unknowns(spec: ModelSpec) -> list[Variable]:
+    """The unknowns of initialization mode, in table order (the same rule for FMI 2.0 and 3.0)."""
+    return [
         v
         for v in spec.variables
         if (v.causality == "output" and v.initial in (None, "calculated", "approx"))
         or v.causality == "calculatedParameter"
         or (v.derivative_of and spec.model_exchange)
     ]
-    if initial_unknowns:
-        lines.append("    <InitialUnknowns>")
-        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in sorted(initial_unknowns, key=lambda v: index[v.name])]
-        lines.append("    </InitialUnknowns>")
-    lines.append("  </ModelStructure>")
-    lines.append("</fmiModelDescription>")
-    return "\n".join(lines) + "\n"
 
 
 def variables_header(spec: ModelSpec) -> str:
@@ -222,6 +334,10 @@ def variables_header(spec: ModelSpec) -> str:
         out.append(f"#define N_{base.upper()}S {spec.count(base)}")
     for v in spec.variables:
         out.append(f"#define VR_{v.identifier} {refs[v.name]}  /* {v.type} {v.name} */")
+    if spec.fmi_version == 3:
+        offsets = spec.fmi3_offsets()
+        out.append("/* FMI 3.0 value references: unique across types (fmi3_wrapper.c maps them back) */")
+        out += [f"#define VR3_{group.upper()} {first}" for group, first in offsets.items()]
     for name, value in spec.defines.items():
         out.append(f"#define {name} {value}")
     for base, c_type, prefix in (("Real", "double", "REAL"), ("Integer", "int", "INTEGER"), ("Boolean", "int", "BOOLEAN")):

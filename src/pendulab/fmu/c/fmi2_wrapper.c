@@ -1,31 +1,39 @@
 /* The one FMI 2.0 wrapper shared by all pendulab FMUs (Model Exchange and Co-Simulation).
  *
  * It owns the life cycle, the mode checks, the variable access by value reference and the logging;
- * each model supplies its equations through fmu_model.h. */
+ * each model supplies its equations through fmu_model.h (shared with fmi3_wrapper.c). */
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "fmi2Functions.h"
 #include "fmu_model.h"
+
+/* The model's instance, then what only this wrapper needs. */
+typedef struct {
+    Instance model;
+    fmi2CallbackFunctions callbacks;
+} Component;
 
 #define UNUSED(x) (void)(x)
 
-void fmu_log(Instance *comp, fmi2Status status, const char *category, const char *message, ...) {
+void fmu_log(Instance *comp, Status status, const char *category, const char *message, ...) {
     char buffer[1024];
     va_list args;
-    if (!comp || !comp->callbacks.logger) return;
-    if (!comp->logging_on && status == fmi2OK) return;
+    const fmi2CallbackFunctions *callbacks = comp ? &((Component *)comp)->callbacks : NULL;
+    if (!callbacks || !callbacks->logger) return;
+    if (!comp->logging_on && status == OK) return;
     va_start(args, message);
     vsnprintf(buffer, sizeof(buffer), message, args);
     va_end(args);
-    comp->callbacks.logger(comp->callbacks.componentEnvironment, comp->instance_name, status, category, "%s", buffer);
+    callbacks->logger(callbacks->componentEnvironment, comp->instance_name, (fmi2Status)status, category, "%s", buffer);
 }
 
 static int in_mode(Instance *comp, const char *function, int allowed) {
     if (!comp) return 0;
     if (allowed & (1 << comp->mode)) return 1;
-    fmu_log(comp, fmi2Error, "logStatusError", "%s must not be called in the current state (mode %d)", function, (int)comp->mode);
+    fmu_log(comp, Error, "logStatusError", "%s must not be called in the current state (mode %d)", function, (int)comp->mode);
     return 0;
 }
 
@@ -59,6 +67,7 @@ static void set_start_values(Instance *comp) {
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
+    Component *component;
     Instance *comp;
     UNUSED(fmuResourceLocation); UNUSED(visible);
     if (!functions || !instanceName || !fmuGUID) return NULL;
@@ -77,18 +86,19 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
 #endif
-    comp = (Instance *)calloc(1, sizeof(Instance));
-    if (!comp) return NULL;
-    comp->instance_name = (fmi2String)malloc(strlen(instanceName) + 1);
-    if (!comp->instance_name) { free(comp); return NULL; }
+    component = (Component *)calloc(1, sizeof(Component));
+    if (!component) return NULL;
+    comp = &component->model;
+    comp->instance_name = (const char *)malloc(strlen(instanceName) + 1);
+    if (!comp->instance_name) { free(component); return NULL; }
     strcpy((char *)comp->instance_name, instanceName);
-    comp->callbacks = *functions;
-    comp->type = fmuType;
+    component->callbacks = *functions;
+    comp->type = fmuType == fmi2ModelExchange ? ModelExchange : CoSimulation;
     comp->logging_on = loggingOn;
     comp->work = model_work_size() ? calloc(1, model_work_size()) : NULL;
     if (model_work_size() && !comp->work) {
         free((void *)comp->instance_name);
-        free(comp);
+        free(component);
         return NULL;
     }
     comp->mode = MODE_INSTANTIATED;
@@ -101,7 +111,7 @@ void fmi2FreeInstance(fmi2Component c) {
     if (!comp) return;
     free(comp->work);
     free((void *)comp->instance_name);
-    free(comp);
+    free((Component *)comp);
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
@@ -122,13 +132,13 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Instance *comp = (Instance *)c;
-    fmi2Status status;
+    Status status;
     CHECK("fmi2ExitInitializationMode", M(MODE_INITIALIZATION));
     status = model_initialize(comp);
-    if (status > fmi2Warning) return status;
+    if (status > Warning) return (fmi2Status)status;
     comp->outputs_stale = 1;
-    comp->mode = comp->type == fmi2CoSimulation ? MODE_STEP : MODE_EVENT;
-    return status;
+    comp->mode = comp->type == CoSimulation ? MODE_STEP : MODE_EVENT;
+    return (fmi2Status)status;
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
@@ -165,7 +175,7 @@ static void refresh(Instance *comp) {
         if (comp->mode != MODE_INSTANTIATED) refresh(comp);                                               \
         for (k = 0; k < nvr; k++) {                                                                       \
             if (vr[k] >= (count)) {                                                                       \
-                fmu_log(comp, fmi2Error, "logStatusError", #Name ": unknown value reference %u", vr[k]);  \
+                fmu_log(comp, Error, "logStatusError", #Name ": unknown value reference %u", vr[k]);  \
                 return fmi2Error;                                                                         \
             }                                                                                             \
             value[k] = comp->array[vr[k]];                                                                \
@@ -184,11 +194,11 @@ static void refresh(Instance *comp) {
         initialized = comp->mode != MODE_INSTANTIATED && comp->mode != MODE_INITIALIZATION;               \
         for (k = 0; k < nvr; k++) {                                                                       \
             if (vr[k] >= (count)) {                                                                       \
-                fmu_log(comp, fmi2Error, "logStatusError", #Name ": unknown value reference %u", vr[k]);  \
+                fmu_log(comp, Error, "logStatusError", #Name ": unknown value reference %u", vr[k]);  \
                 return fmi2Error;                                                                         \
             }                                                                                             \
             if (initialized && fixed[vr[k]]) {                                                            \
-                fmu_log(comp, fmi2Error, "logStatusError",                                               \
+                fmu_log(comp, Error, "logStatusError",                                               \
                         #Name ": value reference %u is a fixed parameter; set it before initialization",  \
                         vr[k]);                                                                           \
                 return fmi2Error;                                                                         \
@@ -210,7 +220,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     Instance *comp = (Instance *)c;
     UNUSED(vr); UNUSED(value);
     if (nvr == 0) return fmi2OK;
-    fmu_log(comp, fmi2Error, "logStatusError", "fmi2GetString: this model has no String variables");
+    fmu_log(comp, Error, "logStatusError", "fmi2GetString: this model has no String variables");
     return fmi2Error;
 }
 
@@ -221,7 +231,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 /* ------------------------------------------------------------------ unsupported optional features */
 #define NOT_SUPPORTED(what)                                                                                \
     do {                                                                                                  \
-        fmu_log((Instance *)c, fmi2Error, "logStatusError", what " is not supported by this FMU");        \
+        fmu_log((Instance *)c, Error, "logStatusError", what " is not supported by this FMU");        \
         return fmi2Error;                                                                                 \
     } while (0)
 
@@ -250,17 +260,17 @@ fmi2Status fmi2CancelStep(fmi2Component c) { NOT_SUPPORTED("fmi2CancelStep"); }
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     Instance *comp = (Instance *)c;
-    fmi2Status status;
+    Status status;
     UNUSED(noSetFMUStatePriorToCurrentPoint);
     CHECK("fmi2DoStep", M(MODE_STEP));
     if (communicationStepSize <= 0) {
-        fmu_log(comp, fmi2Error, "logStatusError", "fmi2DoStep: step size %g must be positive", communicationStepSize);
+        fmu_log(comp, Error, "logStatusError", "fmi2DoStep: step size %g must be positive", communicationStepSize);
         return fmi2Error;
     }
     status = model_do_step(comp, currentCommunicationPoint, communicationStepSize);
     comp->time = currentCommunicationPoint + communicationStepSize;
     comp->outputs_stale = 1;
-    return status;
+    return (fmi2Status)status;
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) { UNUSED(s); UNUSED(value); NOT_SUPPORTED("fmi2GetStatus"); }
@@ -293,8 +303,8 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
 #if N_EVENT_INDICATORS > 0
     {
         int states_changed = 0;
-        fmi2Status status = model_event_update(comp, &states_changed);
-        if (status > fmi2Warning) return status;
+        Status status = model_event_update(comp, &states_changed);
+        if (status > Warning) return (fmi2Status)status;
         info->valuesOfContinuousStatesChanged = states_changed ? fmi2True : fmi2False;
     }
 #endif
@@ -367,7 +377,7 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], s
     Instance *comp = (Instance *)c;
     CHECK("fmi2GetEventIndicators", M(MODE_INITIALIZATION) | M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_TERMINATED));
     if (ni != N_EVENT_INDICATORS) {
-        fmu_log(comp, fmi2Error, "logStatusError", "fmi2GetEventIndicators: %u indicators asked, the model has %d",
+        fmu_log(comp, Error, "logStatusError", "fmi2GetEventIndicators: %u indicators asked, the model has %d",
                 (unsigned)ni, N_EVENT_INDICATORS);
         return fmi2Error;
     }

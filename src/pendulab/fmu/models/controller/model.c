@@ -14,24 +14,24 @@ size_t model_work_size(void) { return sizeof(Work); }
 
 void model_reset(Instance *comp) { (void)comp; /* the wrapper zeroes the work memory */ }
 
-fmi2Status model_initialize(Instance *comp) {
+Status model_initialize(Instance *comp) {
     int n = comp->i[VR_n], k;
     if (n < 0 || n > MAX_ORDER) {
-        fmu_log(comp, fmi2Error, "logStatusError", "controller order n=%d must be within 0..%d", n, MAX_ORDER);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "controller order n=%d must be within 0..%d", n, MAX_ORDER);
+        return Error;
     }
     if (!(comp->r[VR_h] > 0)) {
-        fmu_log(comp, fmi2Error, "logStatusError", "sample period h=%g must be positive", comp->r[VR_h]);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "sample period h=%g must be positive", comp->r[VR_h]);
+        return Error;
     }
     for (k = VR_Lp; k < N_REALS; k++) {
         if (!isfinite(comp->r[k])) {
-            fmu_log(comp, fmi2Error, "logStatusError", "controller parameter with value reference %d is not finite", k);
-            return fmi2Error;
+            fmu_log(comp, Error, "logStatusError", "controller parameter with value reference %d is not finite", k);
+            return Error;
         }
     }
     memset(((Work *)comp->work)->x, 0, sizeof(((Work *)comp->work)->x));
-    return fmi2OK;
+    return OK;
 }
 
 static double error_signal(const Instance *comp) { return comp->r[VR_r] - comp->r[VR_Lp] * comp->r[VR_alpha_measured]; }
@@ -46,7 +46,7 @@ void model_update_outputs(Instance *comp) {
     comp->r[VR_V_command] = y;
 }
 
-fmi2Status model_do_step(Instance *comp, double t, double h) {
+Status model_do_step(Instance *comp, double t, double h) {
     Work *w = (Work *)comp->work;
     const double *A = &comp->r[VR_A_1_1], *B = &comp->r[VR_B_1];
     double e = error_signal(comp);
@@ -54,8 +54,8 @@ fmi2Status model_do_step(Instance *comp, double t, double h) {
     (void)t;
     /* The matrices hold for one sample period only: another step size would silently change the controller. */
     if (fabs(h - comp->r[VR_h]) > 1e-9 + 1e-6 * comp->r[VR_h]) {
-        fmu_log(comp, fmi2Error, "logStatusError", "communication step %g s differs from the controller's sample period h=%g s", h, comp->r[VR_h]);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "communication step %g s differs from the controller's sample period h=%g s", h, comp->r[VR_h]);
+        return Error;
     }
     for (i = 0; i < n; i++) {
         double s = B[i] * e;
@@ -63,5 +63,5 @@ fmi2Status model_do_step(Instance *comp, double t, double h) {
         w->next[i] = s;
     }
     memcpy(w->x, w->next, (size_t)n * sizeof(double));
-    return fmi2OK;
+    return OK;
 }

@@ -55,6 +55,7 @@ def spec() -> ModelSpec:
         states=STATES,
         sources=["model.c", "plant_casadi.c"],
         event_indicators=len(EVENT_INDICATORS),
+        event_indicator_names=EVENT_INDICATORS,
         generated=generated,
         defines={
             "VR_FIRST_PARAMETER": f"VR_{names[0]}",

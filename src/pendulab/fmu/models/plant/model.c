@@ -9,7 +9,7 @@
 #include "fmu_model.h"
 #include "plant_casadi.h"
 
-fmi2Status model_event_update(Instance *comp, int *states_changed);
+Status model_event_update(Instance *comp, int *states_changed);
 
 #define STATE(comp) (&(comp)->r[VR_x])
 #define PARAMS(comp) (&(comp)->r[VR_FIRST_PARAMETER])
@@ -33,22 +33,22 @@ size_t model_work_size(void) { return sizeof(Work); }
 
 void model_reset(Instance *comp) { (void)comp; }
 
-fmi2Status model_initialize(Instance *comp) {
+Status model_initialize(Instance *comp) {
     int k;
     const double *p = PARAMS(comp);
     for (k = 0; k < N_PARAMETERS; k++) {
         if (!isfinite(p[k])) {
-            fmu_log(comp, fmi2Error, "logStatusError", "parameter %s is not finite", PARAMETER_NAMES[k]);
-            return fmi2Error;
+            fmu_log(comp, Error, "logStatusError", "parameter %s is not finite", PARAMETER_NAMES[k]);
+            return Error;
         }
     }
     if (comp->r[VR_Rm] <= 0 || comp->r[VR_r_mp] <= 0 || comp->r[VR_Kg] <= 0 || comp->r[VR_M_cart] <= 0 || comp->r[VR_Mp] < 0) {
-        fmu_log(comp, fmi2Error, "logStatusError", "Rm, r_mp, Kg and M_cart must be > 0 and Mp >= 0");
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "Rm, r_mp, Kg and M_cart must be > 0 and Mp >= 0");
+        return Error;
     }
     if (comp->r[VR_track_half_length] <= 0) {
-        fmu_log(comp, fmi2Error, "logStatusError", "track_half_length=%g must be > 0", comp->r[VR_track_half_length]);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "track_half_length=%g must be > 0", comp->r[VR_track_half_length]);
+        return Error;
     }
     {
         int changed;
@@ -57,7 +57,7 @@ fmi2Status model_initialize(Instance *comp) {
     }
 }
 
-fmi2Status model_event_update(Instance *comp, int *states_changed) {
+Status model_event_update(Instance *comp, int *states_changed) {
     Work *w = (Work *)comp->work;
     const double *arg[5];
     double *res[2];
@@ -65,8 +65,8 @@ fmi2Status model_event_update(Instance *comp, int *states_changed) {
     int round;
     *states_changed = 0;
     if (!isfinite(comp->r[VR_V])) {
-        fmu_log(comp, fmi2Error, "logStatusError", "input V=%g is not finite at t=%g", comp->r[VR_V], t);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "input V=%g is not finite at t=%g", comp->r[VR_V], t);
+        return Error;
     }
     arg[0] = STATE(comp); arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &t; arg[4] = w->regime;
     res[0] = w->regime_next; res[1] = w->next;
@@ -82,7 +82,7 @@ fmi2Status model_event_update(Instance *comp, int *states_changed) {
         memcpy(w->regime, w->regime_next, sizeof(w->regime));
     }
     comp->outputs_stale = 1;
-    return fmi2OK;
+    return OK;
 }
 
 void model_get_event_indicators(Instance *comp, double z[]) {
@@ -102,11 +102,11 @@ static void ode(Instance *comp, const double *state, double t, double *derivativ
     arg[0] = state; arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &t; arg[4] = w->regime;
     res[0] = derivative;
     /* Model Exchange: the switches as the last event left them; Co-Simulation: decided here. */
-    if (comp->type == fmi2ModelExchange) plant_ode_regime(arg, res, w->iw, w->w, 0);
+    if (comp->type == ModelExchange) plant_ode_regime(arg, res, w->iw, w->w, 0);
     else plant_ode(arg, res, w->iw, w->w, 0);
 }
 
-fmi2Status model_do_step(Instance *comp, double t, double h) {
+Status model_do_step(Instance *comp, double t, double h) {
     Work *w = (Work *)comp->work;
     const double *arg[5];
     double *res[1];
@@ -116,8 +116,8 @@ fmi2Status model_do_step(Instance *comp, double t, double h) {
     if (n < 1) n = 1;
     /* fmin/fmax ignore NaN, so the saturation would turn a NaN command into -V_max: refuse it instead. */
     if (!isfinite(comp->r[VR_V])) {
-        fmu_log(comp, fmi2Error, "logStatusError", "input V=%g is not finite at t=%g", comp->r[VR_V], t);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "input V=%g is not finite at t=%g", comp->r[VR_V], t);
+        return Error;
     }
     hs = h / n;
     arg[1] = &comp->r[VR_V]; arg[2] = PARAMS(comp); arg[3] = &ts; arg[4] = &hs;
@@ -129,10 +129,10 @@ fmi2Status model_do_step(Instance *comp, double t, double h) {
         memcpy(STATE(comp), w->next, sizeof(w->next));
     }
     if (!isfinite(comp->r[VR_x]) || !isfinite(comp->r[VR_alpha])) {
-        fmu_log(comp, fmi2Error, "logStatusError", "the state became non-finite at t=%g (check V and the parameters)", t + h);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "the state became non-finite at t=%g (check V and the parameters)", t + h);
+        return Error;
     }
-    return fmi2OK;
+    return OK;
 }
 
 void model_update_outputs(Instance *comp) {

@@ -56,7 +56,7 @@ static void announce(Instance *comp, double t, const char *format, ...) {
     va_start(args, format);
     vsnprintf(text, sizeof(text), format, args);
     va_end(args);
-    fmu_log(comp, fmi2OK, "logEvents", "t=%.3f s: %s", t, text);
+    fmu_log(comp, OK, "logEvents", "t=%.3f s: %s", t, text);
 }
 
 /* Change state; with `log`, announce "from -> to (why)". */
@@ -220,45 +220,45 @@ void model_reset(Instance *comp) {
     m->last_iteration = comp->i[VR_iteration];
 }
 
-fmi2Status model_initialize(Instance *comp) {
+Status model_initialize(Instance *comp) {
     const double deg = M_PI / 180.0;
     double alpha_max = comp->r[VR_alpha_max];
     Memory *m = MEMORY(comp);
     if (!(alpha_max >= ALPHA_MAX_MIN_DEG * deg - ALPHA_MAX_SLACK && alpha_max <= ALPHA_MAX_MAX_DEG * deg + ALPHA_MAX_SLACK)) {
-        fmu_log(comp, fmi2Error, "logStatusError",
+        fmu_log(comp, Error, "logStatusError",
                 "alpha_max = %g rad (%g deg) is outside the allowed %g to %g deg; set alpha_max between %.4f and %.4f rad",
                 alpha_max, DEG(alpha_max), ALPHA_MAX_MIN_DEG, ALPHA_MAX_MAX_DEG, ALPHA_MAX_MIN_DEG * deg, ALPHA_MAX_MAX_DEG * deg);
-        return fmi2Error;
+        return Error;
     }
     if (!(comp->r[VR_x_max] > 0 && isfinite(comp->r[VR_x_max]))) {
-        fmu_log(comp, fmi2Error, "logStatusError", "x_max = %g m must be positive and finite", comp->r[VR_x_max]);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "x_max = %g m must be positive and finite", comp->r[VR_x_max]);
+        return Error;
     }
     if (!(comp->r[VR_capture_window] > 0 && comp->r[VR_capture_window] <= alpha_max)) {
-        fmu_log(comp, fmi2Error, "logStatusError", "capture_window = %g rad must be > 0 and <= alpha_max = %g rad",
+        fmu_log(comp, Error, "logStatusError", "capture_window = %g rad must be > 0 and <= alpha_max = %g rad",
                 comp->r[VR_capture_window], alpha_max);
-        return fmi2Error;
+        return Error;
     }
     if (!(comp->r[VR_centre_tolerance] > 0 && comp->r[VR_centre_tolerance] < comp->r[VR_x_max])) {
-        fmu_log(comp, fmi2Error, "logStatusError", "centre_tolerance = %g m must be > 0 and < x_max = %g m",
+        fmu_log(comp, Error, "logStatusError", "centre_tolerance = %g m must be > 0 and < x_max = %g m",
                 comp->r[VR_centre_tolerance], comp->r[VR_x_max]);
-        return fmi2Error;
+        return Error;
     }
     if (!(comp->r[VR_V_limit] > 0 && isfinite(comp->r[VR_V_limit]))) {
-        fmu_log(comp, fmi2Error, "logStatusError", "V_limit = %g V must be positive and finite", comp->r[VR_V_limit]);
-        return fmi2Error;
+        fmu_log(comp, Error, "logStatusError", "V_limit = %g V must be positive and finite", comp->r[VR_V_limit]);
+        return Error;
     }
     if (comp->b[VR_auto_start]) {
         handle_command(comp, m, CMD_START, upright_angle(comp), comp->time, 1);
         supervise(comp, m, upright_angle(comp), comp->time, 1);
     }
-    return fmi2OK;
+    return OK;
 }
 
-fmi2Status model_do_step(Instance *comp, double t, double h) {
+Status model_do_step(Instance *comp, double t, double h) {
     (void)h;
     evaluate(comp, MEMORY(comp), t, 1);
-    return fmi2OK;
+    return OK;
 }
 
 void model_update_outputs(Instance *comp) {
