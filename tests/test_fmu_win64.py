@@ -83,3 +83,66 @@ def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, supe
         assert np.all(np.isfinite(linux)) and np.any(linux != 0)
         print("\nlinux64", linux, "\nwin64  ", windows, "\nmax |difference|", np.max(np.abs(windows - linux)))
         np.testing.assert_allclose(windows, linux, rtol=0, atol=1e-12)
+
+
+HOST3 = Path(__file__).parent / "hosts" / "fmi3_host.c"
+
+
+def _fmi2_open_loop(plant_fmu: Path, folder: Path, steps: int) -> np.ndarray:
+    """fmu_host.c's open-loop case on the FMI 2.0 plant's linux64 binary, through fmpy."""
+    import math
+
+    from fmpy import extract
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(plant_fmu))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(plant_fmu), str(folder)), modelIdentifier="Plant")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.setReal([refs["alpha"]], [math.pi + 0.3])
+    fmu.exitInitializationMode()
+    for k in range(steps):
+        fmu.setReal([refs["V"]], [12.0 * math.sin(2 * math.pi * k * 1e-3)])
+        fmu.doStep(k * 1e-3, 1e-3)
+    states = np.array(fmu.getReal([refs[n] for n in ("x", "xdot", "alpha", "alphadot")]))
+    fmu.terminate()
+    fmu.freeInstance()
+    return states
+
+
+@pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
+def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_fmu, tmp_path):
+    """Plant3's x86_64-windows DLL under Wine (tests/hosts/fmi3_host.c: Co-Simulation open loop, Model Exchange
+    with state and time events) equals its x86_64-linux binary to 1e-12, and the Co-Simulation case equals
+    the FMI 2.0 plant's."""
+    md = read_model_description(str(plant3_fmu))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    steps = 1500
+    results = {}
+    for platform_dir, compiler, out in (("x86_64-linux", "cc", "host3"), ("x86_64-windows", WIN64_COMPILER, "host3.exe")):
+        folder = tmp_path / platform_dir
+        folder.mkdir()
+        libs = ["-ldl", "-lm"] if platform_dir == "x86_64-linux" else ["-lm"]
+        subprocess.run([compiler, "-std=c99", "-O1", f"-I{FMI_HEADERS}", str(HOST3), "-o", str(folder / out), *libs],
+                       check=True, capture_output=True)
+        binary = folder / f"Plant3{SUFFIX3[platform_dir]}"
+        binary.write_bytes(zipfile.ZipFile(plant3_fmu).read(f"binaries/{platform_dir}/{binary.name}"))
+        command = [str(folder / out)] if platform_dir == "x86_64-linux" else [WINE, str(folder / out)]
+        env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wineprefix")}
+        arguments = [str(binary), md.guid, str(steps), *(str(refs[n]) for n in ("V", "x", "xdot", "alpha", "alphadot"))]
+        run = subprocess.run(command + arguments, capture_output=True, text=True, timeout=300, env=env)
+        assert run.returncode == 0, (platform_dir, run.stdout, run.stderr)
+        lines = [line for line in run.stdout.splitlines() if line.strip()]
+        results[platform_dir] = [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
+    linux, windows = results["x86_64-linux"], results["x86_64-windows"]
+    state_events, time_events = linux[1][4:]
+    assert state_events > 0 and time_events == 2, "Model Exchange met friction switches and the poke's two edges"
+    for a, b in zip(linux, windows):
+        print("\nx86_64-linux  ", a, "\nx86_64-windows", b, "\nmax |difference|", np.max(np.abs(a - b)))
+        assert np.all(np.isfinite(a)) and np.any(a[:4] != 0)
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
+    fmi2 = _fmi2_open_loop(plant_fmu, tmp_path / "fmi2", steps)
+    print("FMI 2.0 plant, same case:", fmi2, "max |difference|", np.max(np.abs(fmi2 - linux[0])))
+    np.testing.assert_allclose(linux[0], fmi2, rtol=0, atol=1e-12)

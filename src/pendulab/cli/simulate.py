@@ -46,7 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: a new folder under runs/)")
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
     parser.add_argument("--animate", action="store_true", help="also write an animation (GIF) of the rig")
-    parser.add_argument("--ssp", action="store_true", help="also write the loop as an SSP file (loop.ssp)")
+    parser.add_argument("--ssp", nargs="?", const="Plant", choices=("Plant", "Plant3"), metavar="PLANT",
+                        help="also write the loop as an SSP file (loop.ssp), with the FMI 2.0 plant (Plant, default) "
+                             "or the FMI 3.0 one (--ssp Plant3)")
     parser.set_defaults(func=run)
 
 
@@ -152,7 +154,8 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.cosim.pendulum import pendulum_system
         from pendulab.cosim.ssp import export_ssp
 
-        system = pendulum_system(params, discretize(controller, h=args.step, method=args.method).to_parameters(), step=args.step, delay=args.delay)
+        system = pendulum_system(params, discretize(controller, h=args.step, method=args.method).to_parameters(), step=args.step,
+                                 delay=args.delay, plant=args.ssp)
         written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=args.stop_time))
     _print_summary(result, out_dir, written, time.perf_counter() - started)
     return 0

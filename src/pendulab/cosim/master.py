@@ -88,6 +88,9 @@ class _Instance:
             raise UserError(f"{fmu_path} of component {name!r} is not a valid FMU: {exc}") from None
         if self.description.coSimulation is None:
             raise UserError(f"{fmu_path} has no Co-Simulation interface; the master runs Co-Simulation FMUs")
+        if self.description.fmiVersion != "2.0":
+            raise UserError(f"{fmu_path} is an FMI {self.description.fmiVersion} FMU; the master runs FMI 2.0 FMUs "
+                            "(the FMI 3.0 plant is for other tools: pendulab simulate --ssp Plant3)")
         self.variables = {v.name: v for v in self.description.modelVariables}
         self.fmu = FMU2Slave(
             guid=self.description.guid,

@@ -20,6 +20,7 @@ import numpy as np
 from pendulab import __version__
 from pendulab.cosim.master import Event, Master
 from pendulab.cosim.system import System
+from pendulab.errors import UserError
 from pendulab.fmu.build import ensure_fmu
 from pendulab.model.parameters import PlantParameters
 
@@ -32,6 +33,9 @@ CONNECTIONS = (
     ("controller.V_command", "supervisor.V_command"),
     ("supervisor.V", "plant.V"),
 )
+
+#: The plant FMUs the loop can name: the same model as FMI 2.0 (default) and FMI 3.0.
+PLANT_FMUS = ("Plant", "Plant3")
 
 #: The plant input the transport delay of the rig (``--delay N``) sits in front of.
 VOLTAGE_INPUT = "plant.V"
@@ -60,6 +64,7 @@ def pendulum_system(
     fmu_dir: Path | None = None,
     controller_fmu: Path | None = None,
     delay: int = 0,
+    plant: str = "Plant",
 ) -> System:
     """The standard three-FMU system.
 
@@ -76,10 +81,15 @@ def pendulum_system(
         Transport delay in control periods between the supervisor's voltage and the plant, as on the
         rig (SPEC §9: the answer to sample k is applied at tick k + N). 0 (default): the voltage
         computed from the measurement at t_k acts from t_k on.
+    plant : {"Plant", "Plant3"}
+        The plant FMU: ``Plant`` (FMI 2.0, default) or ``Plant3`` (the same model as FMI 3.0, for export
+        to other tools with :func:`pendulab.cosim.ssp.export_ssp`; pendulab's master runs FMI 2.0 FMUs).
     """
+    if plant not in PLANT_FMUS:
+        raise UserError(f"plant FMU {plant!r}: choose {' or '.join(PLANT_FMUS)}")
     system = System(step=step)
     plant_start = {**params.as_dict(), **(initial_state or {})}
-    system.add("plant", ensure_fmu("Plant", fmu_dir), plant_start)
+    system.add("plant", ensure_fmu(plant, fmu_dir), plant_start)
     system.add("controller", controller_fmu or ensure_fmu("Controller", fmu_dir), {"Lp": params.Lp, "h": step, **controller_parameters})
     system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), dict(supervisor or {}))
     for source, target in CONNECTIONS:

@@ -4,6 +4,10 @@ The archive holds ``SystemStructure.ssd`` (components, their connectors, start v
 parameter sets, and the connections) and the FMUs under ``resources/``, so any SSP tool (fmpy's
 ``fmpy.ssp``, Ecos, OMSimulator) can load the same loop.
 
+The FMUs may be FMI 2.0 or FMI 3.0 (e.g. the loop with ``Plant3.fmu``, the plant as an FMI 3.0 FMU:
+``pendulum_system(..., plant="Plant3")`` or ``pendulab simulate --ssp Plant3``); connectors and
+parameters carry SSP's types (FMI 3.0's Float64 is an ``ssc:Real``, Int32 an ``ssc:Integer``).
+
 Every component's start values are an inline parameter set of the same name,
 :data:`PARAMETER_SET` (``"initialValues"``): tools that select parameter sets by name apply all of
 them at once, e.g. Ecos with ``EcosSimulation(ssp_path=..., step_size=1e-3).init(parameter_set="initialValues")``.
@@ -35,6 +39,14 @@ NAMESPACES = (
 PARAMETER_SET = "initialValues"
 
 
+#: SSP 1.0 type of an FMI variable type (FMI 2.0 names map to themselves).
+_SSP_TYPES = {"Float64": "Real", "Float32": "Real", "Int32": "Integer", "Enumeration": "Integer"}
+
+
+def _ssp_type(fmi_type: str) -> str:
+    return _SSP_TYPES.get(fmi_type, fmi_type)
+
+
 def _value(type_name: str, value: object) -> str:
     if type_name == "Boolean":
         return "true" if value else "false"
@@ -61,8 +73,8 @@ def system_structure(system: System, name: str = "pendulab", stop_time: float = 
         lines.append("        <ssd:Connectors>")
         for v in description.modelVariables:
             if v.causality in ("input", "output"):
-                unit = f" unit={quoteattr(v.unit)}" if v.unit and v.type == "Real" else ""
-                type_name = "Integer" if v.type == "Enumeration" else v.type
+                unit = f" unit={quoteattr(v.unit)}" if v.unit and _ssp_type(v.type) == "Real" else ""
+                type_name = _ssp_type(v.type)
                 lines.append(
                     f"          <ssd:Connector name={quoteattr(v.name)} kind=\"{v.causality}\"><ssc:{type_name}{unit}/></ssd:Connector>"
                 )
@@ -76,8 +88,7 @@ def system_structure(system: System, name: str = "pendulab", stop_time: float = 
                 "                <ssv:Parameters>",
             ]
             for var, value in component.start_values.items():
-                type_name = variables[var].type if var in variables else "Real"
-                type_name = "Integer" if type_name == "Enumeration" else type_name
+                type_name = _ssp_type(variables[var].type) if var in variables else "Real"
                 lines.append(
                     f"                  <ssv:Parameter name={quoteattr(var)}><ssv:{type_name} value=\"{_value(type_name, value)}\"/></ssv:Parameter>"
                 )
