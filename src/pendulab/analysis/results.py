@@ -31,8 +31,9 @@ import math
 import os
 import re
 import secrets
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import scipy.io
@@ -95,13 +96,6 @@ def write_results(
     except OSError as exc:
         raise UserError(f"cannot create output folder {out}: {exc.strerror or exc}; choose another --out") from None
 
-    # The CSV text is formatted in a thread while run.mat and metrics.json are written and synced
-    # (numpy and fsync release the GIL).
-    from concurrent.futures import ThreadPoolExecutor
-
-    pool = ThreadPoolExecutor(max_workers=1)
-    csv_text = pool.submit(_csv_bytes, names, data)
-    pool.shutdown(wait=False)
     mat_meta = _matlab_meta(meta)
     writers = {
         "mat": lambda f: scipy.io.savemat(
@@ -111,14 +105,20 @@ def write_results(
             oned_as="column",
         ),
         "metrics": lambda f: f.write((json.dumps(_json_safe(metrics), indent=2, allow_nan=False) + "\n").encode()),
-        "csv": lambda f: f.write(csv_text.result()),
     }
     # Write every file to a temporary name first, then move them all into place: a failure half
     # way leaves the previous run's files (or none), never a mixture or a truncated file.
     temporaries: dict[str, Path] = {}
     try:
-        for key, write in writers.items():
-            temporaries[key] = _write_temporary(out, FILE_NAMES[key], write)
+        # run.csv, the slow one (formatting a million numbers), is written by a thread while run.mat
+        # and metrics.json are (numpy's array operations, file writes and fsync release the GIL).
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            csv_file = pool.submit(_write_temporary, out, FILE_NAMES["csv"], lambda f: f.writelines(_csv_blocks(names, data)))
+            try:
+                for key, write in writers.items():
+                    temporaries[key] = _write_temporary(out, FILE_NAMES[key], write)
+            finally:
+                temporaries["csv"] = csv_file.result()
         paths = {}
         for key, tmp in temporaries.items():
             paths[key] = out / FILE_NAMES[key]
@@ -201,92 +201,156 @@ def _column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
 #: Significant digits in run.csv: the decimal mantissa stays below 2**53, so numpy's int64 holds it
 #: exactly and every step of the formatting is a whole-array operation (run.mat keeps the exact values).
 CSV_DIGITS = 15
-_CSV_FIELD = 22  # sign, d0, '.', d1..d14, 'e', exponent sign, three exponent digits
-_PAD = 0  # marks an unused byte of a field; dropped when the rows are joined
-_DIGIT_GROUPS = np.array([[ord(c) for c in f"{i:05d}"] for i in range(100000)], dtype=np.uint8).T.copy()
+
+# Each number's text is built in a fixed field of 24 bytes, held as three little-endian 64-bit words
+# so that every step of the formatting is one operation on whole arrays of words:
+#   byte 0 sign, 1 first digit, 2 decimal point, 3-16 the other 14 digits (word 0: bytes 0-7,
+#   word 1: 8-15, word 2: 16-23), 17-21 the exponent ("e-123"), 23 the separator.
+# Bytes a number does not use are 0 and are dropped when a block of rows is joined.
+_WORD = np.dtype("<u8")
+_FIELD_WORDS = 3
+_FIELD_TEXT = 23  # bytes 0-22: the longest text a field holds
+
+
+def _digit_table(count: int, places: Sequence[int | None]) -> np.ndarray:
+    """For every ``count``-digit group (zero-padded), a word with its k-th digit in ASCII at byte
+    ``places[k]`` of the word (``None``: digit left out)."""
+    groups = np.arange(10**count)
+    table = np.zeros(10**count, dtype=_WORD)
+    for k, place in enumerate(places):
+        if place is not None:
+            digit = (groups // 10 ** (count - 1 - k)) % 10
+            table |= (digit + ord("0")).astype(_WORD) << _WORD.type(8 * place)
+    return table
+
+
+def _trailing_zeros(count: int) -> np.ndarray:
+    """For every ``count``-digit group, its trailing zero digits (``count`` for the group 0)."""
+    groups = np.arange(10**count)
+    return sum((groups % 10**k == 0).astype(np.uint8) for k in range(1, count + 1))
+
+
+# The mantissa d0 d1 ... d14 is split into groups a = d0-d3, b = d4-d7, c = d8-d10, d = d11-d14, and
+# each group's digits go to their bytes in the field by table look-up (one table per word it reaches).
+_A_WORD0 = _digit_table(4, (1, 3, 4, 5))
+_B_WORD0 = _digit_table(4, (6, 7, None, None))
+_B_WORD1 = _digit_table(4, (None, None, 0, 1))
+_C_WORD1 = _digit_table(3, (2, 3, 4))
+_D_WORD1 = _digit_table(4, (5, 6, 7, None))
+_D_WORD2 = _digit_table(4, (None, None, None, 0))
+_TRAILING4 = _trailing_zeros(4)
+_TRAILING3 = _trailing_zeros(3)
+#: Exact powers of ten as ``np.power`` gives them (index: exponent + 300).
+_POWERS_OF_TEN = np.power(10.0, np.arange(-300.0, 301.0))
+
+
+def _layout_tables() -> tuple[np.ndarray, ...]:
+    """Per layout ``shown + 16 * point + 32 * negative`` (``shown``: digits written, 1 to 15): the
+    masks of the digit bytes written in each word, and word 0's sign and decimal point."""
+    layouts = np.arange(64)
+    keep = np.zeros((64, 8 * _FIELD_WORDS), dtype=np.uint8)
+    keep[:, 1] = 0xFF
+    for k in range(1, CSV_DIGITS):
+        keep[:, 2 + k] = np.where(layouts % 16 > k, 0xFF, 0)
+    marks = np.zeros((64, 8), dtype=np.uint8)
+    marks[:, 0] = np.where(layouts >= 32, ord("-"), 0)
+    marks[:, 2] = np.where(layouts % 32 >= 16, ord("."), 0)
+    words = keep.view(_WORD)
+    return words[:, 0].copy(), words[:, 1].copy(), words[:, 2].copy(), marks.view(_WORD)[:, 0].copy()
+
+
+_KEEP_WORD0, _KEEP_WORD1, _KEEP_WORD2, _MARKS_WORD0 = _layout_tables()
+
+
+def _exponent_table() -> np.ndarray:
+    """Word 2's exponent bytes (``e-3`` at bytes 1-3) for exponents -300 to 300 (index: exponent +
+    301); index 0 is no exponent."""
+    text = np.zeros((602, 8), dtype=np.uint8)
+    for e in range(-300, 301):
+        chars = np.frombuffer(f"e{e}".encode(), dtype=np.uint8)
+        text[e + 301, 1 : 1 + chars.size] = chars
+    return text.view(_WORD)[:, 0].copy()
+
+
+_EXPONENT_WORD2 = _exponent_table()
 
 
 def _format_numbers(values: np.ndarray) -> np.ndarray:
-    """``values`` as text, vectorized: a ``(_CSV_FIELD, n)`` uint8 array, unused bytes ``_PAD``.
+    """``values`` as text, vectorized: an ``(n, 3)`` array of words, one 24-byte field per number.
 
     Each number is written with at most :data:`CSV_DIGITS` significant digits (correctly rounded
     from the double up to one unit in the last digit), trailing zeros dropped: integers below 1e15
     as integers (``2``, ``-120``), numbers in [1, 10) without an exponent (``1.5``), others as
-    ``d.ddde-5``. NaN, infinities and exponents beyond +-280 fall back to Python's ``repr``.
+    ``d.ddde-5``. NaN, infinities and exponents beyond +-280 fall back to Python's ``repr``. The
+    separator byte (23) is left 0.
     """
-    n = values.size
-    a = np.abs(values)
-    zero = a == 0
-    normal = np.isfinite(values) & (zero | ((a > 1e-280) & (a < 1e280)))
-    safe = np.where(normal & ~zero, a, 1.0)
+    magnitude = np.abs(values)
+    zero = magnitude == 0
+    normal = np.isfinite(values) & (zero | ((magnitude > 1e-280) & (magnitude < 1e280)))
+    safe = np.where(normal & ~zero, magnitude, 1.0)
     e = np.floor(np.log10(safe)).astype(np.int64)
-    mant = np.rint(safe * np.power(10.0, (CSV_DIGITS - 1 - e).astype(float))).astype(np.int64)
+    mant = np.rint(safe * _POWERS_OF_TEN[CSV_DIGITS - 1 + 300 - e]).astype(np.int64)
     bad = (mant >= 10**CSV_DIGITS) | (mant < 10 ** (CSV_DIGITS - 1))
     if bad.any():  # log10 is one off next to a power of ten
         eb = np.floor(np.log10(safe[bad]) + 1e-12).astype(np.int64)
-        mb = np.rint(safe[bad] * np.power(10.0, (CSV_DIGITS - 1 - eb).astype(float))).astype(np.int64)
+        mb = np.rint(safe[bad] * _POWERS_OF_TEN[CSV_DIGITS - 1 + 300 - eb]).astype(np.int64)
         over = mb >= 10**CSV_DIGITS
         e[bad], mant[bad] = eb + over, np.where(over, mb // 10, mb)
     mant[zero] = 0
     e[zero] = 0
-    # Digits by table look-up of five-digit groups (integer division is the slow part).
-    high, low = np.divmod(mant, 100000)
-    top, middle = np.divmod(high, 100000)
-    digits = np.empty((CSV_DIGITS, n), dtype=np.uint8)
-    digits[0:5] = _DIGIT_GROUPS[:, top]
-    digits[5:10] = _DIGIT_GROUPS[:, middle]
-    digits[10:15] = _DIGIT_GROUPS[:, low]
-    out = np.empty((_CSV_FIELD, n), dtype=np.uint8)
-    out[0] = np.where(values < 0, ord("-"), _PAD)
-    out[1] = digits[0]
-    out[3:17] = digits[1:]
-    run = np.ones(n, dtype=bool)
-    trailing = np.zeros(n, dtype=np.int8)
-    for k in range(CSV_DIGITS - 1, 0, -1):
-        run &= digits[k] == ord("0")
-        trailing += run
-    nd = (CSV_DIGITS - trailing).astype(np.int8)  # significant digits, at least one
+    # The digit groups (integer division by a constant is fast in numpy; divmod is not).
+    high = mant // 10**7
+    low = mant - high * 10**7
+    a = high // 10**4
+    b = high - a * 10**4
+    c = low // 10**4
+    d = low - c * 10**4
+    trailing = _TRAILING4[d] + (d == 0) * (_TRAILING3[c] + (c == 0) * (_TRAILING4[b] + (b == 0) * _TRAILING4[a]))
+    nd = (CSV_DIGITS - np.minimum(trailing, CSV_DIGITS - 1)).astype(np.int8)  # significant digits, at least one
     e8 = np.clip(e, -100, 100).astype(np.int8)
     integer = (e8 >= 1) & (e8 < CSV_DIGITS) & (nd <= e8 + 1)
     shown = np.where(integer, e8 + 1, nd)
-    for k in range(1, CSV_DIGITS):
-        out[2 + k] *= shown > k
-    out[2] = np.where(integer | (nd == 1), _PAD, ord("."))
     plain = integer | (e8 == 0)
-    ae = np.abs(e)
-    out[17] = np.where(plain, _PAD, ord("e"))
-    out[18] = np.where(plain | (e >= 0), _PAD, ord("-"))
-    out[19:22] = _DIGIT_GROUPS[2:, np.minimum(ae, 999)]
-    out[19] *= ~plain & (ae >= 100)
-    out[20] *= ~plain & (ae >= 10)
-    out[21] *= ~plain
+    layout = shown + 16 * (~integer & (nd > 1)) + 32 * (values < 0)
+    words = np.empty((values.size, _FIELD_WORDS), dtype=_WORD)
+    words[:, 0] = ((_A_WORD0[a] | _B_WORD0[b]) & _KEEP_WORD0[layout]) | _MARKS_WORD0[layout]
+    words[:, 1] = (_B_WORD1[b] | _C_WORD1[c] | _D_WORD1[d]) & _KEEP_WORD1[layout]
+    words[:, 2] = (_D_WORD2[d] & _KEEP_WORD2[layout]) | _EXPONENT_WORD2[np.where(plain, 0, e + 301)]
     for i in np.flatnonzero(~normal):
-        text = np.frombuffer(repr(float(values[i])).encode(), dtype=np.uint8)
-        out[:, i] = _PAD
-        out[: text.size, i] = text
-    return out
+        value = float(values[i])
+        text = repr(value)
+        if len(text) > _FIELD_TEXT:  # 17 digits and a three-digit exponent: keep 15
+            text = f"{value:.{CSV_DIGITS}g}"
+        field = words[i].view(np.uint8)
+        field[:] = 0
+        field[: len(text)] = np.frombuffer(text.encode(), dtype=np.uint8)
+    return words
 
 
 #: Rows formatted per block: the block's intermediate arrays stay in the processor's cache, which
 #: makes the writer about twice as fast as one pass over a long run.
-_CSV_BLOCK_ROWS = 2048
+_CSV_BLOCK_ROWS = 4096
+
+
+def _csv_blocks(names: Sequence[str], data: np.ndarray) -> Iterator[bytes]:
+    """The CSV text of a table, block by block: the header, then one line per row."""
+    yield (",".join(names) + "\n").encode()
+    for i in range(0, data.shape[0], _CSV_BLOCK_ROWS):
+        yield _csv_rows(data[i : i + _CSV_BLOCK_ROWS])
 
 
 def _csv_bytes(names: Sequence[str], data: np.ndarray) -> bytes:
     """The CSV text of a table (header, then one line per row), formatted as whole arrays."""
-    header = (",".join(names) + "\n").encode()
-    blocks = (_csv_rows(data[i : i + _CSV_BLOCK_ROWS]) for i in range(0, data.shape[0], _CSV_BLOCK_ROWS))
-    return header + b"".join(blocks)
+    return b"".join(_csv_blocks(names, data))
 
 
 def _csv_rows(data: np.ndarray) -> bytes:
     n, m = data.shape
-    table = np.empty((n, m, _CSV_FIELD + 1), dtype=np.uint8)
-    table[:, :, :_CSV_FIELD] = _format_numbers(np.ascontiguousarray(data.T).ravel()).reshape(_CSV_FIELD, m, n).transpose(2, 1, 0)
-    table[:, :, _CSV_FIELD] = ord(",")
-    table[:, m - 1, _CSV_FIELD] = ord("\n")
-    flat = table.reshape(-1)
-    return flat[flat != _PAD].tobytes()
+    words = _format_numbers(np.ascontiguousarray(data).ravel()).reshape(n, m, _FIELD_WORDS)
+    separators = np.full(m, ord(","), dtype=_WORD)
+    separators[-1] = ord("\n")
+    words[:, :, 2] |= separators << _WORD.type(56)
+    return words.tobytes().translate(None, b"\0")
 
 
 def _matlab_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
