@@ -374,19 +374,21 @@ def _lobes(t: np.ndarray, dev: np.ndarray, h: float) -> list[_Lobe]:
     changes = np.flatnonzero(np.diff(side[marks]) != 0) + 1
     starts = np.concatenate(([0], changes))
     ends = np.concatenate((changes, [marks.size]))
+    flipped = -dev  # the deviation as seen from a lobe below the reference (once, not per lobe)
     lobes = []
     for a, b in zip(starts, ends):
         first, last_marked = int(marks[a]), int(marks[b - 1])
         # The lobe's extent runs until the next lobe begins (or the end of the record).
         stop = int(marks[b]) if b < marks.size else dev.size
         sign = int(side[first])
-        segment = sign * dev[first:stop]
+        oriented = dev if sign > 0 else flipped
+        segment = oriented[first:stop]
         top = float(segment.max())
         plateau = np.flatnonzero(segment >= top - 1e-12 * max(1.0, abs(top)))
         i0, i1 = first + int(plateau[0]), first + int(plateau[-1])
         peak_time = 0.5 * (t[i0] + t[i1])
         if i0 == i1 and 0 < i0 < dev.size - 1:
-            peak_time = _parabolic_peak(t, sign * dev, i0)
+            peak_time = _parabolic_peak(t, oriented, i0)
         # Closed: the signal left the top by more than the hysteresis before the lobe's end.
         after = segment[i1 - first :]
         closed = bool(b < marks.size or (after.size and top - after.min() > h))
