@@ -298,7 +298,7 @@ def model_description_fmi3_xml(spec: ModelSpec) -> str:
     lines.append("  </ModelVariables>")
     lines.append("  <ModelStructure>")
     lines += [f'    <Output valueReference="{refs[v.name]}"/>' for v in spec.variables if v.causality == "output"]
-    lines += [f'    <ContinuousStateDerivative valueReference="{refs[v.name]}"/>' for v in spec.variables if v.derivative_of]
+    lines += [f'    <ContinuousStateDerivative valueReference="{refs[v.name]}"/>' for v in spec.variables if v.derivative_of and spec.model_exchange]
     lines += [f'    <InitialUnknown valueReference="{refs[v.name]}"/>' for v in _initial_unknowns(spec)]
     lines += [f'    <EventIndicator valueReference="{refs[name]}"/>' for name in indicators]
     lines.append("  </ModelStructure>")
