@@ -100,7 +100,7 @@ def write_results(
     writers = {
         "mat": lambda f: scipy.io.savemat(
             f,
-            {**{n: data[:, [i]] for i, n in enumerate(names)}, "meta": mat_meta},
+            {**{n: data[:, i : i + 1] for i, n in enumerate(names)}, "meta": mat_meta},  # column views, no copies
             format="5",
             oned_as="column",
         ),
