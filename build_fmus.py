@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Build every pendulab FMU into fmus/ (Plant, Controller, Supervisor).
+"""Build every pendulab FMU into fmus/: Plant, Controller, Supervisor (FMI 2.0) and Plant3 (the plant as FMI 3.0).
 
 Usage: python build_fmus.py [NAME ...]
 """
