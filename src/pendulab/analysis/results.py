@@ -232,7 +232,8 @@ def _trailing_zeros(count: int) -> np.ndarray:
 
 # The mantissa d0 d1 ... d14 is split into groups a = d0-d3, b = d4-d7, c = d8-d10, d = d11-d14, and
 # each group's digits go to their bytes in the field by table look-up (one table per word it reaches).
-_A_WORD0 = _digit_table(4, (1, 3, 4, 5))
+# Word 0 also carries a sign and a decimal point in every entry; the layout's mask keeps those needed.
+_A_WORD0 = _digit_table(4, (1, 3, 4, 5)) | _WORD.type(ord("-") | ord(".") << 16)
 _B_WORD0 = _digit_table(4, (6, 7, None, None))
 _B_WORD1 = _digit_table(4, (None, None, 0, 1))
 _C_WORD1 = _digit_table(3, (2, 3, 4))
@@ -244,22 +245,21 @@ _TRAILING3 = _trailing_zeros(3)
 _POWERS_OF_TEN = np.power(10.0, np.arange(-300.0, 301.0))
 
 
-def _layout_tables() -> tuple[np.ndarray, ...]:
-    """Per layout ``shown + 16 * point + 32 * negative`` (``shown``: digits written, 1 to 15): the
-    masks of the digit bytes written in each word, and word 0's sign and decimal point."""
+def _keep_masks() -> tuple[np.ndarray, ...]:
+    """Per layout ``shown + 16 * point + 32 * negative`` (``shown``: digits written, 1 to 15), the
+    mask of the bytes written in each of the three words: sign, digits, decimal point."""
     layouts = np.arange(64)
     keep = np.zeros((64, 8 * _FIELD_WORDS), dtype=np.uint8)
+    keep[:, 0] = np.where(layouts >= 32, 0xFF, 0)
     keep[:, 1] = 0xFF
+    keep[:, 2] = np.where(layouts % 32 >= 16, 0xFF, 0)
     for k in range(1, CSV_DIGITS):
         keep[:, 2 + k] = np.where(layouts % 16 > k, 0xFF, 0)
-    marks = np.zeros((64, 8), dtype=np.uint8)
-    marks[:, 0] = np.where(layouts >= 32, ord("-"), 0)
-    marks[:, 2] = np.where(layouts % 32 >= 16, ord("."), 0)
     words = keep.view(_WORD)
-    return words[:, 0].copy(), words[:, 1].copy(), words[:, 2].copy(), marks.view(_WORD)[:, 0].copy()
+    return words[:, 0].copy(), words[:, 1].copy(), words[:, 2].copy()
 
 
-_KEEP_WORD0, _KEEP_WORD1, _KEEP_WORD2, _MARKS_WORD0 = _layout_tables()
+_KEEP_WORD0, _KEEP_WORD1, _KEEP_WORD2 = _keep_masks()
 
 
 def _exponent_table() -> np.ndarray:
@@ -311,9 +311,10 @@ def _format_numbers(values: np.ndarray) -> np.ndarray:
     integer = (e8 >= 1) & (e8 < CSV_DIGITS) & (nd <= e8 + 1)
     shown = np.where(integer, e8 + 1, nd)
     plain = integer | (e8 == 0)
-    layout = shown + 16 * (~integer & (nd > 1)) + 32 * (values < 0)
+    point = ~integer & (nd > 1)
+    layout = (shown.view(np.uint8) | (point.view(np.uint8) << 4) | ((values < 0).view(np.uint8) << 5)).astype(np.intp)
     words = np.empty((values.size, _FIELD_WORDS), dtype=_WORD)
-    words[:, 0] = ((_A_WORD0[a] | _B_WORD0[b]) & _KEEP_WORD0[layout]) | _MARKS_WORD0[layout]
+    words[:, 0] = (_A_WORD0[a] | _B_WORD0[b]) & _KEEP_WORD0[layout]
     words[:, 1] = (_B_WORD1[b] | _C_WORD1[c] | _D_WORD1[d]) & _KEEP_WORD1[layout]
     words[:, 2] = (_D_WORD2[d] & _KEEP_WORD2[layout]) | _EXPONENT_WORD2[np.where(plain, 0, e + 301)]
     for i in np.flatnonzero(~normal):
