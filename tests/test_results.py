@@ -275,7 +275,8 @@ def test_csv_numbers_match_python_formatting_to_15_digits():
         rng.normal(size=3000) * 10.0 ** rng.integers(-30, 30, size=3000),
         [0.0, -0.0, 1.0, -1.0, 10.0, 0.1, 1e-3, 1e-4, 1e-5, 1e14, 1e15, 1e16, 2.0, -2.5, 1234.5, 120.0,
          9.999999999999999, 99999999999999.9, 0.30000000000000004, 1e-300, -1e300, 5e-324,
-         np.nan, np.inf, -np.inf, 123456789012345678.0],
+         np.nan, np.inf, -np.inf, 123456789012345678.0,
+         -1.2345678901234567e-290],  # beyond the table's exponents, and its repr is 24 characters long
     ])
     text = _csv_bytes(["v"], values[:, None]).decode()
     lines = text.split("\n")
