@@ -34,6 +34,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -370,29 +371,33 @@ def _lobes(t: np.ndarray, dev: np.ndarray, h: float) -> list[_Lobe]:
     marks = np.flatnonzero(side != 0)
     if marks.size == 0:
         return []
-    # Each change of side among the marked samples starts a new lobe.
+    # Each change of side among the marked samples starts a new lobe; a lobe's extent runs until the
+    # next lobe begins (or the end of the record). All lobes are read at once (a long limit cycle has
+    # hundreds), each on its side of the reference: its samples times its sign.
     changes = np.flatnonzero(np.diff(side[marks]) != 0) + 1
-    starts = np.concatenate(([0], changes))
-    ends = np.concatenate((changes, [marks.size]))
-    flipped = -dev  # the deviation as seen from a lobe below the reference (once, not per lobe)
+    firsts = marks[np.concatenate(([0], changes))]
+    last_marked = marks[np.concatenate((changes, [marks.size])) - 1]
+    stops = np.append(marks[changes], dev.size)
+    signs = side[firsts]
+    lengths = stops - firsts
+    oriented = dev[firsts[0] :] * np.repeat(signs, lengths)
+    tops = np.maximum.reduceat(oriented, firsts - firsts[0])
+    # The extremum's plateau (a quantized peak is flat): its first and last sample.
+    on_top = np.flatnonzero(oriented >= np.repeat(tops - 1e-12 * np.maximum(1.0, np.abs(tops)), lengths)) + firsts[0]
+    i0 = on_top[np.searchsorted(on_top, firsts)]
+    i1 = on_top[np.searchsorted(on_top, stops) - 1]
+    peak_times = 0.5 * (t[i0] + t[i1])
+    flipped = -dev  # the deviation as seen from a lobe below the reference
     lobes = []
-    for a, b in zip(starts, ends):
-        first, last_marked = int(marks[a]), int(marks[b - 1])
-        # The lobe's extent runs until the next lobe begins (or the end of the record).
-        stop = int(marks[b]) if b < marks.size else dev.size
-        sign = int(side[first])
-        oriented = dev if sign > 0 else flipped
-        segment = oriented[first:stop]
-        top = float(segment.max())
-        plateau = np.flatnonzero(segment >= top - 1e-12 * max(1.0, abs(top)))
-        i0, i1 = first + int(plateau[0]), first + int(plateau[-1])
-        peak_time = 0.5 * (t[i0] + t[i1])
-        if i0 == i1 and 0 < i0 < dev.size - 1:
-            peak_time = _parabolic_peak(t, oriented, i0)
-        # Closed: the signal left the top by more than the hysteresis before the lobe's end.
-        after = segment[i1 - first :]
-        closed = bool(b < marks.size or (after.size and top - after.min() > h))
-        lobes.append(_Lobe(sign, first, last_marked, i0, float(peak_time), closed))
+    for sign, first, last, i, j, peak_time in zip(signs.tolist(), firsts.tolist(), last_marked.tolist(), i0.tolist(), i1.tolist(), peak_times.tolist()):
+        if i == j and 0 < i < dev.size - 1:  # a sharp (unquantized) peak
+            peak_time = _parabolic_peak(t, dev if sign > 0 else flipped, i)
+        lobes.append(_Lobe(sign, first, last, i, peak_time, True))
+    # Closed: the signal left the top by more than the hysteresis before the lobe's end (every lobe
+    # but the last ends where the next one begins).
+    after = oriented[i1[-1] - firsts[0] :]
+    if not (after.size and tops[-1] - after.min() > h):
+        lobes[-1] = dataclasses.replace(lobes[-1], closed=False)
     return lobes
 
 
