@@ -241,7 +241,8 @@ _D_WORD1 = _digit_table(4, (5, 6, 7, None))
 _D_WORD2 = _digit_table(4, (None, None, None, 0))
 _TRAILING4 = _trailing_zeros(4)
 _TRAILING3 = _trailing_zeros(3)
-#: Exact powers of ten as ``np.power`` gives them (index: exponent + 300).
+#: Powers of ten as ``np.power`` gives them (index: exponent + 300): the factors the mantissas have
+#: always been computed with (on some processors a few differ from the correctly rounded double).
 _POWERS_OF_TEN = np.power(10.0, np.arange(-300.0, 301.0))
 
 
