@@ -142,6 +142,23 @@ def test_failed_write_leaves_no_partial_file(tmp_path, monkeypatch):
     assert list(out.iterdir()) == []
 
 
+def test_failed_csv_write_in_its_thread_leaves_no_partial_file(tmp_path, monkeypatch):
+    # run.csv is written by a thread beside run.mat and metrics.json: its failure is reported the same
+    # way, and the files already written by the other thread are removed too.
+    import pendulab.analysis.results as results
+
+    out = tmp_path / "out"
+
+    def broken_blocks(names, data):
+        yield b"t,x\n"
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(results, "_csv_blocks", broken_blocks)
+    with pytest.raises(UserError, match="No space left"):
+        write_results(out, make_columns(5), {}, {})
+    assert list(out.iterdir()) == []
+
+
 def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path):
     target = tmp_path / "plot.png"
     target.write_bytes(b"old")
