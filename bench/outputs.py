@@ -16,9 +16,9 @@ In one process, repeated (``--repeats``, default 5) in turns, medians compared:
   per-row CSV writer (how the files were written before the vectorized writer).
 
 Each run is timed by wall clock and by the process's CPU time (all threads). The bar is about wall
-clock; on a loaded machine the wall clock also counts the time spent waiting for a core, and the CPU
-time gives no credit for the CSV being written beside run.mat on the second core, so the ratio by CPU
-time is what a machine with one free core gives.
+clock, which on a loaded machine also counts the time spent waiting for a core (other processes on
+both cores double it). The CPU time hardly depends on the load: it leaves out that wait and the
+disk's (fsync), and gives no credit for run.csv being written beside run.mat on the second core.
 
 Also the whole command as a user types it (``pendulab simulate --demo --stop-time 100 --out DIR``,
 a fresh process, interpreter start and imports included), for reference.
