@@ -35,7 +35,7 @@ def main() -> int:
     from pendulab.calibration.fit import fit_parameters, ramp_start
     from pendulab.model.parameters import PlantParameters
 
-    for shape in ("ramps with rests", "fast steps", "sine sweep"):
+    for shape in ("ramps with rests", "fast steps", "sine sweep"):  # the closed loop: tests/test_fit_shapes.py
         log = synthetic_log(shape, duration=args.duration, voltage_noise=args.voltage_noise)
         x_true = simulate(TRUE, log.V[:-1], log.period, (log.x[0], 0, 0, 0))[:, 0]
         true_rms = float(np.sqrt(np.mean((x_true - log.x) ** 2)))

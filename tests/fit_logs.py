@@ -13,7 +13,7 @@ from pendulab.calibration.logs import RampLog
 from pendulab.model.parameters import PlantParameters
 
 #: Parameters the project's defaults have never seen.
-TRUE = PlantParameters.preset("none", Beq=6.1, force_gain=0.82, F1=2.3, v1=0.003, F2=3.9, v2=0.045, B=31.0)
+TRUE = PlantParameters.preset("none", Beq=6.1, force_gain=0.82, F1=2.3, v1=0.003, F2=3.9, v2=0.06, B=60.0)
 STEP = 1e-3
 
 
@@ -71,3 +71,21 @@ def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 
     t = np.arange(n + 1) * STEP
     V_logged = np.append(V, 0.0) + rng.normal(0.0, voltage_noise, n + 1)
     return RampLog(t, V_logged, x, source=f"synthetic {shape}")
+
+
+def closed_loop_log(params: PlantParameters | None = None, duration: float = 8.0, *, noise: float = 1e-5, seed: int = 0) -> tuple[RampLog, PlantParameters]:
+    """A closed-loop run with the long pendulum up: the demo controller through the FMUs, poked at 1 s.
+
+    Returns the log (quantized angle and position as the encoders give them, the applied voltage) and
+    the parameters it was made with (the pendulum's, the poke and the friction of :data:`TRUE`).
+    """
+    from pendulab.control.controller import demo_controller
+    from pendulab.cosim.pendulum import simulate_poke
+
+    friction = {n: getattr(TRUE, n) for n in ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")}
+    params = params or PlantParameters.preset("long", poke_magnitude=150.0, poke_duration=0.005, poke_start=1.0, **friction)
+    run = simulate_poke(demo_controller("long"), params, stop_time=duration)
+    c = run.columns
+    rng = np.random.default_rng(seed)
+    x = params.q_x * np.round((c["x"] + rng.normal(0.0, noise, len(c["x"]))) / params.q_x)
+    return RampLog(c["t"], c["voltage"], x, alpha=c["alpha_measured"], source="synthetic closed loop, long pendulum"), params

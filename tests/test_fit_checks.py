@@ -47,14 +47,15 @@ def test_forward_check_is_reported_stored_and_matches_an_independent_replay(caps
     out = tmp_path / "fit.json"
     status, text, err = run(capsys, "fit", str(path), "--out", str(out))
     assert status == 0, err
-    assert "forward simulation (true stick-slip law, the whole log)" in text
+    assert "forward simulation (true stick-slip law, the whole log, " in text
     meta = load_calibration(out).metadata
     rms, largest, limit = meta["forward_simulation_rms_m"], meta["forward_simulation_max_m"], meta["forward_simulation_limit_m"]
     assert 0 < rms <= largest and rms <= limit
     cal = load_calibration(out)
     fitted = cal.apply(PlantParameters.preset("none"))
-    # The replay of an independent call agrees (it starts from the first sample, the fit from its first node).
-    assert forward_rms(fitted, log) == pytest.approx(rms, rel=0.1, abs=5 * TRUE.q_x)
+    # The fit's replay restarts at the cart's rests, so it can only miss by less than a free-running
+    # replay of an independent call, which carries every error to the end of the log.
+    assert rms <= forward_rms(fitted, log) + 5 * TRUE.q_x
     # The true values replay the log to the noise and the encoder step: the check can tell.
     assert forward_rms(TRUE, log) < 2 * TRUE.q_x
 

@@ -1,0 +1,273 @@
+"""The fit's last stage and its check: the logs replayed under the true stick-slip law.
+
+:func:`pendulab.calibration.fit.fit_parameters` first solves a smoothed problem (multiple shooting);
+the smoothing that makes it solvable also biases it. Here the answer is polished on what the fit is
+finally judged by, a replay of every log through the plant with the law's switches as they are
+(:mod:`pendulab.calibration._replay`):
+
+* **anchors** (:class:`Anchors`): the replay restarts wherever the log says what the state is: at the
+  start of each rest of the cart (the logged position, at rest); for an upright pendulum, which is
+  open-loop unstable, also every :data:`UNSTABLE_WINDOW` seconds from the fit's state estimate;
+* **polish** (:func:`polish`): a pattern search on the replay's position (and angle) errors, each
+  step trying every parameter up and down in one batched replay;
+* **uncertainty** (:func:`part_spread`): the log is cut into parts at rests, the polish is repeated on
+  each part from the answer, and the spread of the parts' answers gives the standard uncertainty
+  (a jackknife over the parts). It measures what a different stretch of log would have said, which
+  the residual's noise level, strongly correlated along a replay, does not.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from pendulab.calibration._replay import replay
+from pendulab.model.parameters import PlantParameters
+
+#: A rest: the logged position stays within this many encoder steps (or 6 noise sigmas) for REST_WINDOW.
+REST_STEPS = 2.5
+REST_WINDOW = 0.02
+#: An upright pendulum's replay restarts from the state estimate this often (s).
+UNSTABLE_WINDOW = 0.25
+
+
+@dataclass
+class Anchors:
+    """One log prepared for replays: its data, first state and restarts.
+
+    Attributes
+    ----------
+    V, t : array (n,)
+        The voltage and times of the steps (the log without its last sample).
+    measured : array (n, n_out)
+        Logged position (and angle) after each step.
+    sigma : array (n_out,)
+        Measurement noise, the weights of the errors.
+    x0 : array (4,)
+        State at the first sample.
+    restarts : dict
+        ``{k: state}`` at which the replay continues from a known state.
+    segments : array
+        Start sample of each stretch between rests, for cutting the log into parts.
+    """
+
+    V: np.ndarray
+    t: np.ndarray
+    measured: np.ndarray
+    sigma: np.ndarray
+    x0: np.ndarray
+    restarts: dict[int, np.ndarray]
+    segments: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.V)
+
+    def crop(self, start: int, stop: int) -> "Anchors":
+        """Steps ``start`` to ``stop`` (``start`` is 0 or a restart, where the state is known)."""
+        x0 = self.x0 if start == 0 else self.restarts[start]
+        restarts = {k - start: s for k, s in self.restarts.items() if start < k < stop}
+        segments = self.segments[(self.segments >= start) & (self.segments < stop)] - start
+        return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments)
+
+
+def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple[int, int]]:
+    """Rests of the cart, ``[(first, stop), ...]``: runs where the position stays put for :data:`REST_WINDOW`.
+
+    In the lab's law a stuck cart is not quite still: friction cancels the motor's force, while
+    ``Beq`` slows the speed it entered with (below ``v1``) only exponentially, over a time ``Mc/Beq``.
+    """
+    w = max(3, int(round(REST_WINDOW / period)))
+    if len(x) <= w:
+        return []
+    windows = np.lib.stride_tricks.sliding_window_view(x, w)
+    still = np.ptp(windows, axis=1) <= max(REST_STEPS * step, 6.0 * noise)
+    edges = np.diff(np.r_[0, still.astype(np.int8), 0])
+    begins, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(b), int(e) + w - 1) for b, e in zip(begins, ends)]
+
+
+def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarray, step: float, with_pendulum: bool) -> Anchors:
+    """Restarts of one log: its rests, and for an upright pendulum the fit's state every window.
+
+    ``nodes`` ``(ns, N+1)`` are the fit's state estimates at samples ``0, node_stride, ...``.
+    """
+    ns = nodes.shape[0]
+    x0 = np.r_[nodes[:, 0], np.zeros(4 - ns)]
+    restarts: dict[int, np.ndarray] = {}
+    upright = with_pendulum and log.alpha is not None and float(np.median(np.abs(log.alpha))) < math.pi / 2
+    if not with_pendulum:
+        w = max(3, int(round(REST_WINDOW / log.period)))
+        for first, stop in rests(log.x[:used], step, float(sigma[0]), log.period):
+            # Late in the rest, where the creep has died down; position and speed from a line through
+            # the positions around that sample (the encoder's steps average out over it).
+            k = max(first, stop - w)
+            if 0 < k < used - 1:
+                lo, hi = max(first, k - 2 * w), min(stop, k + w)
+                slope, value = np.polyfit(log.t[lo:hi] - log.t[k], log.x[lo:hi], 1)
+                restarts[k] = np.array([float(value), float(slope), 0.0, 0.0])
+    if upright:
+        every = max(1, int(round(UNSTABLE_WINDOW / (node_stride * log.period))))
+        for j in range(every, nodes.shape[1] - 1, every):
+            restarts[j * node_stride] = nodes[:, j].copy()
+    columns = [log.x[1:used]] + ([log.alpha[1:used]] if with_pendulum else [])
+    segments = np.unique(np.r_[0, sorted(restarts)]).astype(int)
+    return Anchors(
+        V=log.V[: used - 1], t=log.t[: used - 1], measured=np.column_stack(columns), sigma=sigma, x0=x0,
+        restarts=restarts, segments=segments,
+    )
+
+
+def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...]) -> np.ndarray:
+    """Weighted replay errors, ``(m, n_errors)``, for parameter sets ``vectors`` ``(m, n_params)``."""
+    rows = []
+    for a in logs:
+        states = replay(vectors, a.V, a.t, a.x0, a.restarts, free=free)
+        simulated = states[:, :, [0, 2][: a.measured.shape[1]]]
+        errors = (simulated - a.measured[None]) / a.sigma[None, None, :]
+        rows.append(errors.reshape(errors.shape[0], -1))
+    return np.concatenate(rows, axis=1)
+
+
+@dataclass
+class Polished:
+    theta: np.ndarray
+    cost: float
+    start_cost: float
+    iterations: int
+    replays: int
+
+
+def polish(
+    logs: list[Anchors],
+    params0: PlantParameters,
+    names: tuple[str, ...],
+    scales: np.ndarray,
+    theta: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    prior: tuple[np.ndarray, float] | None = None,
+    max_iter: int = 12,
+    first_step: float = 0.02,
+    min_step: float = 1e-3,
+    deadline: float = math.inf,
+) -> Polished:
+    """A pattern search on the replay errors over the scaled parameters ``theta``.
+
+    The replay's error is not smooth in the parameters: a breakaway that happens or not is a jump, so
+    derivatives (even finite differences) mislead. Each iteration tries every parameter up and down
+    by a relative ``radius`` and repeats the last good move, all in one batched replay, and keeps the
+    best if it lowers the cost; otherwise the radius shrinks threefold, down to ``min_step``. The
+    order constraints ``F1 <= F2`` and ``v1 <= v2`` and the bounds are kept by projection. It stops
+    early at ``deadline`` (``time.perf_counter()``).
+    """
+    base = np.asarray(params0.as_vector(), dtype=float)
+    all_names = PlantParameters.names()
+    idx = [all_names.index(n) for n in names]
+    free = tuple(names)
+
+    def vectors(thetas: np.ndarray) -> np.ndarray:
+        out = np.tile(base, (thetas.shape[0], 1))
+        out[:, idx] = thetas * scales[None, :]
+        return out
+
+    def project(th: np.ndarray) -> np.ndarray:
+        th = np.clip(th, lower, upper)
+        value = dict(zip(names, th * scales))
+        for low, high in (("F1", "F2"), ("v1", "v2")):
+            if low in value and high in value and value[low] > value[high]:
+                mid = 0.5 * (value[low] + value[high])
+                th[names.index(low)], th[names.index(high)] = mid / scales[names.index(low)], mid / scales[names.index(high)]
+        return th
+
+    def with_prior(r: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+        if prior is None:
+            return r
+        centre, weight = prior
+        return np.concatenate([r, math.sqrt(weight) * (thetas - centre[None, :])], axis=1)
+
+    def residuals(thetas: np.ndarray) -> np.ndarray:
+        return with_prior(replay_errors(logs, vectors(thetas), free), thetas)
+
+    theta = project(np.asarray(theta, dtype=float).copy())
+    r = residuals(theta[None])[0]
+    cost = start_cost = float(r @ r)
+    radius, replays, it, n = first_step, 1, 0, len(theta)
+    momentum = np.zeros(n)
+    for it in range(1, max_iter + 1):
+        if time.perf_counter() > deadline:
+            break
+        # Every parameter up and down by the radius (relative), and the last accepted move again,
+        # all in one batched replay.
+        moves = np.vstack([np.diag(radius * np.maximum(np.abs(theta), 1e-2)), -np.diag(radius * np.maximum(np.abs(theta), 1e-2)), momentum[None, :]])
+        trials = np.array([project(theta + m) for m in moves])
+        R = residuals(trials)
+        replays += 1
+        costs = np.einsum("ij,ij->i", R, R)
+        best = int(np.argmin(costs))
+        if costs[best] < cost * (1 - 1e-6):
+            momentum = trials[best] - theta
+            theta, r, cost = trials[best], R[best], float(costs[best])
+        else:
+            momentum = np.zeros(n)
+            radius /= 3.0
+            if radius < min_step:
+                break
+    return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=replays)
+
+
+def log_parts(logs: list[Anchors], n_parts: int) -> list[list[Anchors]]:
+    """The logs cut into ``n_parts`` stretches of about equal length, each starting at a known state."""
+    total = sum(a.n for a in logs)
+    bounds = np.linspace(0, total, n_parts + 1)
+    parts: list[list[Anchors]] = [[] for _ in range(n_parts)]
+    offset = 0
+    for a in logs:
+        cuts = np.r_[a.segments, a.n]
+        # The part of each stretch between rests, by where its middle falls; then one crop per run of stretches.
+        owner = np.minimum(np.searchsorted(bounds, offset + 0.5 * (cuts[:-1] + cuts[1:]), side="right") - 1, n_parts - 1)
+        start = 0
+        for s in range(1, len(owner) + 1):
+            if s == len(owner) or owner[s] != owner[start]:
+                parts[int(owner[start])].append(a.crop(int(cuts[start]), int(cuts[s])))
+                start = s
+        offset += a.n
+    return [p for p in parts if p]
+
+
+def part_spread(
+    logs: list[Anchors],
+    params0: PlantParameters,
+    names: tuple[str, ...],
+    scales: np.ndarray,
+    theta: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    prior: tuple[np.ndarray, float] | None,
+    n_parts: int = 4,
+    max_iter: int = 6,
+    resolution: float = 3e-4,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Standard uncertainty of ``theta`` from refits on parts of the logs (None if they cannot be cut).
+
+    Each part is polished on its own from ``theta``; with ``K`` parts, each holding ``1/K`` of the
+    data, the whole logs' answer varies ``sqrt(K)`` times less than the parts' answers do. The search
+    stops at steps of ``resolution`` (relative), which is also the smallest spread reported.
+
+    Returns
+    -------
+    sigma, estimates
+        The standard uncertainty of each scaled parameter and the parts' answers ``(K, n)``.
+    """
+    parts = log_parts(logs, n_parts)
+    if len(parts) < 2:
+        return None
+    estimates = np.array([
+        polish(part, params0, names, scales, theta, lower, upper, prior, max_iter=max_iter, first_step=0.01, min_step=resolution).theta
+        for part in parts
+    ])
+    spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(parts))
+    return np.maximum(spread, resolution * np.abs(theta)), estimates

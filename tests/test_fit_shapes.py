@@ -1,0 +1,104 @@
+"""The fit on logs of shapes its own code never generates (issue 8, must-show 1).
+
+Each log is the plant under the true stick-slip law (or the closed loop of the FMUs) with parameters the
+defaults have never seen, 10 um of position noise and the encoder's quantization. The fit starts from the
+lab's defaults, not from the answer.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fit_logs import TRUE, closed_loop_log, synthetic_log
+
+from pendulab.calibration._polish import rests
+from pendulab.calibration._replay import replay
+from pendulab.calibration._simulation import simulate
+from pendulab.calibration.fit import fit_parameters
+from pendulab.model.parameters import PlantParameters
+
+WITHIN = {"Beq": 0.05, "force_gain": 0.05, "F1": 0.10, "F2": 0.10, "B": 0.10}
+
+
+def relative_errors(result, true: PlantParameters) -> dict[str, float]:
+    return {n: result.values[n] / getattr(true, n) - 1 for n in WITHIN}
+
+
+@pytest.fixture(scope="module", params=["fast steps", "sine sweep"])
+def open_loop(request):
+    log = synthetic_log(request.param, duration=20.0, voltage_noise=0.0)
+    return log, fit_parameters([log], PlantParameters.preset("none"))
+
+
+def test_open_loop_shapes_recover_the_parameters_and_replay_the_log(open_loop):
+    log, result = open_loop
+    errors = relative_errors(result, TRUE)
+    for name, limit in WITHIN.items():
+        assert abs(errors[name]) <= limit, f"{log.source}: {name} {100 * errors[name]:+.1f} %"
+    # The replay of the whole log with the answer: within a few encoder steps (the true values: about one).
+    assert result.forward_ok
+    assert result.forward_rms <= 5 * TRUE.q_x, f"{log.source}: replay RMS {result.forward_rms * 1e6:.0f} um"
+
+
+def test_the_uncertainty_comes_from_refits_on_parts_and_covers_the_error(open_loop, request):
+    log, result = open_loop
+    if log.source.endswith("fast steps"):
+        # Known gap (issue 8): on the steps the parts' refits hardly move from the whole log's answer, so
+        # the spread (0.03 %) is far below the error (force gain 1.9 %). Strict: passing would mean fixed.
+        request.node.add_marker(pytest.mark.xfail(strict=True, reason="part refits understate the uncertainty on fast steps"))
+    assert "parts" in result.uncertainty_method
+    for name in ("Beq", "force_gain", "F1", "B"):
+        sigma, error = result.uncertainty[name], abs(result.values[name] - getattr(TRUE, name))
+        assert 0 < sigma < 0.1 * abs(result.values[name])
+        assert error <= 5 * sigma + 0.005 * abs(getattr(TRUE, name)), f"{log.source}: {name} off by {error:.3g}, sigma {sigma:.3g}"
+
+
+def test_ramps_with_rests_recover_the_drag_and_the_breakaway():
+    # F2 shows only when the cart crawls at forces near it; on these ramps it barely does (see the note).
+    log = synthetic_log("ramps with rests", duration=20.0, voltage_noise=0.0)
+    result = fit_parameters([log], PlantParameters.preset("none"))
+    errors = relative_errors(result, TRUE)
+    for name in ("Beq", "force_gain", "F1", "B"):
+        assert abs(errors[name]) <= WITHIN[name], f"{name} {100 * errors[name]:+.1f} %"
+    assert result.forward_ok
+
+
+def test_closed_loop_run_with_the_pendulum_up_uses_the_angle():
+    log, true = closed_loop_log(duration=8.0)
+    assert log.alpha is not None and np.ptp(log.alpha) > 0.02  # the poke swung it
+    start = true.with_values(F1=1.5, v1=0.005, F2=3.0, v2=0.05, B=20.0, Beq=4.3, force_gain=1.0)
+    result = fit_parameters([log], start)
+    errors = relative_errors(result, true)
+    for name, limit in WITHIN.items():
+        assert abs(errors[name]) <= limit, f"{name} {100 * errors[name]:+.1f} %"
+    assert result.restarts > 0  # the unstable replay restarts from the fit's state estimates
+    assert result.forward_rms <= 2 * true.q_x
+
+
+def test_replay_restarts_at_rests_so_the_true_values_replay_a_log_to_the_noise():
+    log = synthetic_log("fast steps", duration=8.0)
+    spans = rests(log.x, TRUE.q_x, 1e-5, log.period)
+    assert len(spans) >= 3
+    # The compiled replay equals the reference simulation when it never restarts.
+    x0 = np.array([log.x[0], 0.0, 0.0, 0.0])
+    compiled = replay([TRUE], log.V[:-1], log.t[:-1], x0)[0, :, 0]
+    reference = simulate(TRUE, log.V[:-1], log.period, x0)[1:, 0]
+    assert np.max(np.abs(compiled - reference)) < 1e-9
+    # A restart replaces the state: restarting on the reference trajectory changes nothing after it.
+    k = len(log) // 2
+    state = simulate(TRUE, log.V[:k], log.period, x0)[-1]
+    restarted = replay([TRUE], log.V[:-1], log.t[:-1], x0 + np.array([0.01, 0, 0, 0]), {k: state})[0, :, 0]
+    assert np.max(np.abs(restarted[k:] - reference[k:])) < 1e-9
+    assert np.max(np.abs(restarted[: k - 1] - reference[: k - 1])) > 0.009
+
+
+def test_a_replay_with_wrong_values_is_rejected():
+    log = synthetic_log("sine sweep", duration=10.0, voltage_noise=0.0)
+    good = fit_parameters([log], PlantParameters.preset("none"), max_iter=30, uncertainty_parts=False)
+    assert good.forward_ok
+    # The same check on values 16 % off (as the issue's report): far above the encoder step.
+    wrong = TRUE.with_values(Beq=TRUE.Beq * 0.84, force_gain=TRUE.force_gain * 0.84)
+    x = replay([wrong], log.V[:-1], log.t[:-1], np.array([log.x[0], 0, 0, 0]))[0, :, 0]
+    assert math.sqrt(np.mean((x - log.x[1:]) ** 2)) > good.forward_limit
