@@ -154,12 +154,21 @@ def polish(
     first_step: float = 0.02,
     min_step: float = 1e-3,
     deadline: float = math.inf,
+    scan: tuple[str, ...] = ("F1", "F2", "v2"),
+    scan_spans: tuple[float, ...] = (0.15, 0.015),
+    scan_points: int = 21,
+    scan_rounds: int = 2,
+    pairs: tuple[tuple[str, str], ...] = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain")),
 ) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
 
     The replay's error is not smooth in the parameters: a breakaway that happens or not is a jump, so
-    derivatives (even finite differences) mislead. Each iteration tries every parameter up and down
-    by a relative ``radius`` and repeats the last good move, all in one batched replay, and keeps the
+    derivatives (even finite differences) mislead. The parameters ``scan`` (the thresholds whose
+    jumps dominate) are first scanned one by one over ``scan_spans`` (relative, coarse then fine,
+    ``scan_points`` each; ``scan_rounds`` times, as they interact). Each iteration tries every
+    parameter up and down by a relative ``radius``, the four diagonal moves of each of ``pairs``
+    (parameters that trade off: the slip region's corner ``F2, v2``, the two forces, and ``Beq``
+    against the force gain, which both set a steady speed) and the last good move, all in one batched replay, and keeps the
     best if it lowers the cost; otherwise the radius shrinks threefold, down to ``min_step``. The
     order constraints ``F1 <= F2`` and ``v1 <= v2`` and the bounds are kept by projection. It stops
     early at ``deadline`` (``time.perf_counter()``).
@@ -196,13 +205,39 @@ def polish(
     r = residuals(theta[None])[0]
     cost = start_cost = float(r @ r)
     radius, replays, it, n = first_step, 1, 0, len(theta)
+    # The thresholds first: whether a push breaks the cart away (F1) or slides it freely (F2) is a
+    # jump in the replay, and a smoothed fit's threshold a few per cent off misses whole motions.
+    # A scan along each (coarse, then fine around the best), one batched replay per scan.
+    for name in [n_ for n_ in scan if n_ in names and max_iter > 0] * scan_rounds:
+        j = names.index(name)
+        for span in scan_spans:
+            if time.perf_counter() > deadline:
+                break
+            trials = np.tile(theta, (scan_points, 1))
+            trials[:, j] = theta[j] * (1.0 + np.linspace(-span, span, scan_points))
+            trials = np.array([project(th) for th in trials])
+            R = residuals(trials)
+            replays += 1
+            costs = np.einsum("ij,ij->i", R, R)
+            best = int(np.argmin(costs))
+            if costs[best] < cost:
+                theta, r, cost = trials[best], R[best], float(costs[best])
     momentum = np.zeros(n)
     for it in range(1, max_iter + 1):
         if time.perf_counter() > deadline:
             break
         # Every parameter up and down by the radius (relative), and the last accepted move again,
         # all in one batched replay.
-        moves = np.vstack([np.diag(radius * np.maximum(np.abs(theta), 1e-2)), -np.diag(radius * np.maximum(np.abs(theta), 1e-2)), momentum[None, :]])
+        size = radius * np.maximum(np.abs(theta), 1e-2)
+        diagonal = []
+        for a_, b_ in pairs:
+            if a_ in names and b_ in names:
+                i_, j_ = names.index(a_), names.index(b_)
+                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                    m_ = np.zeros(n)
+                    m_[i_], m_[j_] = si * size[i_], sj * size[j_]
+                    diagonal.append(m_)
+        moves = np.vstack([np.diag(size), -np.diag(size), *([np.array(diagonal)] if diagonal else []), momentum[None, :]])
         trials = np.array([project(theta + m) for m in moves])
         R = residuals(trials)
         replays += 1

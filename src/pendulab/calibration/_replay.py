@@ -17,7 +17,9 @@ is replayed chunk by chunk.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 from functools import lru_cache
 from typing import Sequence
 
@@ -55,6 +57,14 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
     chunk = ca.Function("replay_chunk1", [s0, Vc, tc, rc, src, thc, hc], [states])
     tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed)).encode()).hexdigest()[:10]
     name = f"pendulab_replay_{tag}"
+    if compile and n_sets > 1:
+        # The parameter sets in parallel on the machine's cores (OpenMP in the generated C). CasADi's own
+        # build has no OpenMP and warns about its evaluator, which is not used here: the warning is dropped.
+        with contextlib.redirect_stderr(io.StringIO()):
+            parallel = chunk.map(name, "openmp", n_sets, [1, 2, 3, 4, 6], [])
+        library, _ = _compile([parallel], name, optimize="-O2", flags=("-fopenmp",))
+        if library:
+            return ca.external(name, library)
     f = chunk.map(name, "serial", n_sets, [1, 2, 3, 4, 6], [])
     if compile:
         library, _ = _compile([f], name, optimize="-O2")

@@ -35,7 +35,7 @@ def cache_dir() -> Path:
     return Path(root) / "fit"
 
 
-def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1") -> tuple[str | None, bool]:
+def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1", flags: Sequence[str] = ()) -> tuple[str | None, bool]:
     """Shared library holding ``functions`` (built once, cached) and whether it was built just now.
 
     ``(None, False)`` without a working compiler.
@@ -49,12 +49,12 @@ def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1")
             gen.add(f)
         gen.generate(tmp + "/")
         source = Path(tmp, f"{name}.c").read_bytes()
-        digest = hashlib.sha256(source + ca.__version__.encode() + optimize.encode()).hexdigest()[:16]
+        digest = hashlib.sha256(source + ca.__version__.encode() + " ".join([optimize, *flags]).encode()).hexdigest()[:16]
         target = cache_dir() / f"{name}_{digest}.so"
         if target.is_file():
             return str(target), False
         partial = Path(tmp, target.name)
-        command = [compiler, optimize, "-shared", "-fPIC", "-fno-math-errno", str(Path(tmp, f"{name}.c")), "-o", str(partial), "-lm"]
+        command = [compiler, optimize, *flags, "-shared", "-fPIC", "-fno-math-errno", str(Path(tmp, f"{name}.c")), "-o", str(partial), "-lm"]
         try:
             result = subprocess.run(command, capture_output=True, text=True, timeout=600)
         except (OSError, subprocess.TimeoutExpired):
