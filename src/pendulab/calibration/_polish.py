@@ -137,6 +137,7 @@ class Polished:
     theta: np.ndarray
     cost: float
     start_cost: float
+    seconds_per_set: float  # one parameter set replayed over all the logs
     iterations: int
     replays: int
 
@@ -156,7 +157,7 @@ def polish(
     deadline: float = math.inf,
     scan: tuple[str, ...] = ("F1", "F2", "v2"),
     scan_spans: tuple[float, ...] = (0.15, 0.015),
-    scan_points: int = 21,
+    scan_points: int = 15,
     scan_rounds: int = 2,
     pairs: tuple[tuple[str, str], ...] = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain")),
 ) -> Polished:
@@ -198,8 +199,14 @@ def polish(
         centre, weight = prior
         return np.concatenate([r, math.sqrt(weight) * (thetas - centre[None, :])], axis=1)
 
+    clock = {"sets": 0, "seconds": 0.0}
+
     def residuals(thetas: np.ndarray) -> np.ndarray:
-        return with_prior(replay_errors(logs, vectors(thetas), free), thetas)
+        t0 = time.perf_counter()
+        out = with_prior(replay_errors(logs, vectors(thetas), free), thetas)
+        clock["sets"] += thetas.shape[0]
+        clock["seconds"] += time.perf_counter() - t0
+        return out
 
     theta = project(np.asarray(theta, dtype=float).copy())
     r = residuals(theta[None])[0]
@@ -251,7 +258,7 @@ def polish(
             radius /= 3.0
             if radius < min_step:
                 break
-    return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=replays)
+    return Polished(theta=theta, cost=cost, start_cost=start_cost, seconds_per_set=clock["seconds"] / max(clock["sets"], 1), iterations=it, replays=replays)
 
 
 def log_parts(logs: list[Anchors], n_parts: int) -> list[list[Anchors]]:
@@ -301,8 +308,48 @@ def part_spread(
     if len(parts) < 2:
         return None
     estimates = np.array([
-        polish(part, params0, names, scales, theta, lower, upper, prior, max_iter=max_iter, first_step=0.01, min_step=resolution).theta
+        polish(part, params0, names, scales, theta, lower, upper, prior, max_iter=max_iter, first_step=0.01, min_step=resolution, scan=()).theta
         for part in parts
     ])
     spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(parts))
     return np.maximum(spread, resolution * np.abs(theta)), estimates
+
+
+#: Relative offsets of the profile scan around the answer (each side).
+PROFILE_OFFSETS = (0.001, 0.003, 0.01, 0.03, 0.1)
+
+
+def profile_width(logs: list[Anchors], params0: PlantParameters, names: tuple[str, ...], scales: np.ndarray, theta: np.ndarray,
+                  lower: np.ndarray, upper: np.ndarray, prior: tuple[np.ndarray, float] | None) -> np.ndarray:
+    """How far each parameter can move, the others kept, before the replay gets worse (scaled units).
+
+    (The prior is left out: it is negligible against the logs.)
+
+    A threshold the logs never cross (no push between two breakaway forces, say) leaves the cost flat
+    over a range; refits of parts then agree and their spread says nothing. Here each parameter is
+    moved by :data:`PROFILE_OFFSETS` both ways in one batched replay, and the half-width is the largest
+    offset at which the cost stays within ``cost / segments`` of the answer's (the cost of one of the
+    roughly independent stretches between restarts).
+    """
+    n = len(theta)
+    offsets = np.array([s * o for o in PROFILE_OFFSETS for s in (-1.0, 1.0)])
+    trials = [theta.copy()]
+    for j in range(n):
+        for o in offsets:
+            th = theta.copy()
+            th[j] = theta[j] * (1.0 + o) if abs(theta[j]) > 1e-12 else o
+            trials.append(np.clip(th, lower, upper))
+    base = np.asarray(params0.as_vector(), dtype=float)
+    idx = [PlantParameters.names().index(x) for x in names]
+    vectors = np.tile(base, (len(trials), 1))
+    vectors[:, idx] = np.array(trials) * scales[None, :]
+    R = replay_errors(logs, vectors, names)
+    costs = np.einsum("ij,ij->i", R, R)
+    segments = sum(len(a.segments) for a in logs)
+    limit = costs[0] * (1.0 + 1.0 / max(segments, 1))
+    widths = np.zeros(n)
+    for j in range(n):
+        c = costs[1 + j * len(offsets) : 1 + (j + 1) * len(offsets)]
+        inside = np.abs(offsets[c <= limit])
+        widths[j] = (inside.max() if inside.size else 0.0) * abs(theta[j])
+    return widths

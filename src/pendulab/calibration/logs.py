@@ -86,6 +86,12 @@ class RampLog:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
+    def slice(self, first: int, stop: int) -> "RampLog":
+        """Samples ``first`` to ``stop - 1``."""
+        part = slice(first, stop)
+        alpha = None if self.alpha is None else self.alpha[part]
+        return RampLog(self.t[part], self.V[part], self.x[part], alpha, self.source, self.interrupted, self.events)
+
     def between(self, start: float, stop: float) -> "RampLog":
         """The samples with ``start <= t < stop``."""
         keep = (self.t >= start) & (self.t < stop)
