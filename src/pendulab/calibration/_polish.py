@@ -156,7 +156,7 @@ def polish(
     min_step: float = 1e-3,
     deadline: float = math.inf,
     scan: tuple[str, ...] = ("F1", "F2", "v2"),
-    scan_spans: tuple[float, ...] = (0.15, 0.015),
+    scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015),
     scan_points: int = 15,
     scan_rounds: int = 2,
     pairs: tuple[tuple[str, str], ...] = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain")),
@@ -166,7 +166,8 @@ def polish(
     The replay's error is not smooth in the parameters: a breakaway that happens or not is a jump, so
     derivatives (even finite differences) mislead. The parameters ``scan`` (the thresholds whose
     jumps dominate) are first scanned one by one over ``scan_spans`` (relative, coarse then fine,
-    ``scan_points`` each; ``scan_rounds`` times, as they interact). Each iteration tries every
+    ``scan_points`` factors each, log-spaced within ``1 + span`` either way: a factor 3 first, for a
+    smoothed answer caught in a wrong basin; ``scan_rounds`` times, as they interact). Each iteration tries every
     parameter up and down by a relative ``radius``, the four diagonal moves of each of ``pairs``
     (parameters that trade off: the slip region's corner ``F2, v2``, the two forces, and ``Beq``
     against the force gain, which both set a steady speed) and the last good move, all in one batched replay, and keeps the
@@ -221,7 +222,7 @@ def polish(
             if time.perf_counter() > deadline:
                 break
             trials = np.tile(theta, (scan_points, 1))
-            trials[:, j] = theta[j] * (1.0 + np.linspace(-span, span, scan_points))
+            trials[:, j] = theta[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), scan_points))
             trials = np.array([project(th) for th in trials])
             R = residuals(trials)
             replays += 1

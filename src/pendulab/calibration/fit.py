@@ -270,24 +270,44 @@ STAGE_SECONDS = 20.0
 PIECE_SECONDS = 4.0
 
 
+def log_step(log: RampLog) -> float:
+    """The encoder step of a log's positions: the smallest change between samples."""
+    dx = np.abs(np.diff(log.x))
+    steps = dx[dx > 1e-12]
+    return float(np.min(steps)) if steps.size else 0.0
+
+
 def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int]) -> list[tuple[RampLog, int, int]]:
     """``(piece, index of its log, first sample)`` for the smoothed fit: whole logs if they are short.
 
-    Longer logs give pieces spread evenly over them (as many per log as its share of the time), each
-    starting on a shooting node of the whole log.
+    Longer logs give the PIECE_SECONDS windows where the cart stops and starts most often, then
+    travels most (breakaways and sticking tell the friction apart; a long rest tells little), up to
+    STAGE_SECONDS in all, not overlapping, each starting on a shooting node of its log.
     """
     total = sum(log.duration for log in logs)
     if total <= STAGE_SECONDS * 1.25:
         return [(log, j, 0) for j, log in enumerate(logs)]
-    out = []
+    from pendulab.calibration._polish import rests
+
+    candidates = []
     for j, log in enumerate(logs):
-        count = max(1, int(round(STAGE_SECONDS / PIECE_SECONDS * log.duration / total)))
-        length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         M = interval_samples(log)
-        for start in np.linspace(0, len(log) - length, count):
-            first = int(start) // M * M
-            out.append((log.slice(first, first + length), j, first))
-    return out
+        length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
+        travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
+        # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
+        edges = np.array(sorted(k for span in rests(log.x, log_step(log), _noise_level(log.x), log.period) for k in span))
+        stride = max(M, (length // 8) // M * M)
+        for first in range(0, len(log) - length + 1, stride):
+            changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
+            moved = (travel[first + length - 1] - travel[first]) / max(travel[-1], 1e-12)
+            candidates.append((changes + moved, j, first, length))
+    chosen: list[tuple[int, int, int]] = []
+    for _, j, first, length in sorted(candidates, key=lambda c: -c[0]):
+        if all(j != k or first + length <= f or f + n <= first for k, f, n in chosen):
+            chosen.append((j, first, length))
+        if len(chosen) * PIECE_SECONDS >= STAGE_SECONDS:
+            break
+    return [(logs[j].slice(first, first + length), j, first) for j, first, length in sorted(chosen)]
 
 
 def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: Callable[[RampLog], int]) -> None:
