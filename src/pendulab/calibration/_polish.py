@@ -142,15 +142,52 @@ class Polished:
     replays: int
 
 
+@dataclass(frozen=True)
+class Space:
+    """The fitted parameters as the search sees them: scaled values ``theta`` (value / scale).
+
+    ``params0`` gives every parameter that is not fitted; ``lower``/``upper`` bound ``theta``;
+    ``prior`` is ``(centre, weight)`` of the fit's weak prior, or None.
+    """
+
+    params0: PlantParameters
+    names: tuple[str, ...]
+    scales: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    prior: tuple[np.ndarray, float] | None = None
+
+    def vectors(self, thetas: np.ndarray) -> np.ndarray:
+        """Full parameter vectors ``(m, n_params)`` for scaled values ``(m, n)``."""
+        all_names = PlantParameters.names()
+        out = np.tile(np.asarray(self.params0.as_vector(), dtype=float), (thetas.shape[0], 1))
+        out[:, [all_names.index(n) for n in self.names]] = thetas * self.scales[None, :]
+        return out
+
+    def project(self, th: np.ndarray) -> np.ndarray:
+        """Within the bounds, with ``F1 <= F2`` and ``v1 <= v2`` (a crossed pair meets in the middle)."""
+        th = np.clip(th, self.lower, self.upper)
+        names, scales = self.names, self.scales
+        value = dict(zip(names, th * scales))
+        for low, high in (("F1", "F2"), ("v1", "v2")):
+            if low in value and high in value and value[low] > value[high]:
+                mid = 0.5 * (value[low] + value[high])
+                th[names.index(low)], th[names.index(high)] = mid / scales[names.index(low)], mid / scales[names.index(high)]
+        return th
+
+    def residuals(self, logs: list[Anchors], thetas: np.ndarray) -> np.ndarray:
+        """Weighted replay errors and the prior's residuals, ``(m, n_residuals)``."""
+        r = replay_errors(logs, self.vectors(thetas), self.names)
+        if self.prior is None:
+            return r
+        centre, weight = self.prior
+        return np.concatenate([r, math.sqrt(weight) * (thetas - centre[None, :])], axis=1)
+
+
 def polish(
     logs: list[Anchors],
-    params0: PlantParameters,
-    names: tuple[str, ...],
-    scales: np.ndarray,
+    space: Space,
     theta: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    prior: tuple[np.ndarray, float] | None = None,
     max_iter: int = 12,
     first_step: float = 0.02,
     min_step: float = 1e-3,
@@ -175,36 +212,12 @@ def polish(
     order constraints ``F1 <= F2`` and ``v1 <= v2`` and the bounds are kept by projection. It stops
     early at ``deadline`` (``time.perf_counter()``).
     """
-    base = np.asarray(params0.as_vector(), dtype=float)
-    all_names = PlantParameters.names()
-    idx = [all_names.index(n) for n in names]
-    free = tuple(names)
-
-    def vectors(thetas: np.ndarray) -> np.ndarray:
-        out = np.tile(base, (thetas.shape[0], 1))
-        out[:, idx] = thetas * scales[None, :]
-        return out
-
-    def project(th: np.ndarray) -> np.ndarray:
-        th = np.clip(th, lower, upper)
-        value = dict(zip(names, th * scales))
-        for low, high in (("F1", "F2"), ("v1", "v2")):
-            if low in value and high in value and value[low] > value[high]:
-                mid = 0.5 * (value[low] + value[high])
-                th[names.index(low)], th[names.index(high)] = mid / scales[names.index(low)], mid / scales[names.index(high)]
-        return th
-
-    def with_prior(r: np.ndarray, thetas: np.ndarray) -> np.ndarray:
-        if prior is None:
-            return r
-        centre, weight = prior
-        return np.concatenate([r, math.sqrt(weight) * (thetas - centre[None, :])], axis=1)
-
+    names, project = space.names, space.project
     clock = {"sets": 0, "seconds": 0.0}
 
     def residuals(thetas: np.ndarray) -> np.ndarray:
         t0 = time.perf_counter()
-        out = with_prior(replay_errors(logs, vectors(thetas), free), thetas)
+        out = space.residuals(logs, thetas)
         clock["sets"] += thetas.shape[0]
         clock["seconds"] += time.perf_counter() - t0
         return out
@@ -283,13 +296,8 @@ def log_parts(logs: list[Anchors], n_parts: int) -> list[list[Anchors]]:
 
 def part_spread(
     logs: list[Anchors],
-    params0: PlantParameters,
-    names: tuple[str, ...],
-    scales: np.ndarray,
+    space: Space,
     theta: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    prior: tuple[np.ndarray, float] | None,
     n_parts: int = 4,
     max_iter: int = 6,
     resolution: float = 3e-4,
@@ -309,7 +317,7 @@ def part_spread(
     if len(parts) < 2:
         return None
     estimates = np.array([
-        polish(part, params0, names, scales, theta, lower, upper, prior, max_iter=max_iter, first_step=0.01, min_step=resolution, scan=()).theta
+        polish(part, space, theta, max_iter=max_iter, first_step=0.01, min_step=resolution, scan=()).theta
         for part in parts
     ])
     spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(parts))
@@ -320,8 +328,7 @@ def part_spread(
 PROFILE_OFFSETS = (0.001, 0.003, 0.01, 0.03, 0.1)
 
 
-def profile_width(logs: list[Anchors], params0: PlantParameters, names: tuple[str, ...], scales: np.ndarray, theta: np.ndarray,
-                  lower: np.ndarray, upper: np.ndarray, prior: tuple[np.ndarray, float] | None) -> np.ndarray:
+def profile_width(logs: list[Anchors], space: Space, theta: np.ndarray) -> np.ndarray:
     """How far each parameter can move, the others kept, before the replay gets worse (scaled units).
 
     (The prior is left out: it is negligible against the logs.)
@@ -339,12 +346,8 @@ def profile_width(logs: list[Anchors], params0: PlantParameters, names: tuple[st
         for o in offsets:
             th = theta.copy()
             th[j] = theta[j] * (1.0 + o) if abs(theta[j]) > 1e-12 else o
-            trials.append(np.clip(th, lower, upper))
-    base = np.asarray(params0.as_vector(), dtype=float)
-    idx = [PlantParameters.names().index(x) for x in names]
-    vectors = np.tile(base, (len(trials), 1))
-    vectors[:, idx] = np.array(trials) * scales[None, :]
-    R = replay_errors(logs, vectors, names)
+            trials.append(np.clip(th, space.lower, space.upper))
+    R = replay_errors(logs, space.vectors(np.array(trials)), space.names)
     costs = np.einsum("ij,ij->i", R, R)
     segments = sum(len(a.segments) for a in logs)
     limit = costs[0] * (1.0 + 1.0 / max(segments, 1))

@@ -545,7 +545,8 @@ def fit_parameters(
     theta_smooth = w_opt[: len(names)]
     # The polish may take the budget up to POLISH_SHARE; the refits on parts take what they need after it.
     deadline = t_start + POLISH_SHARE * time_budget
-    polished = _polish.polish(replays, params0, names, scales, theta_smooth, lower, upper, prior, max_iter=polish_iter, deadline=deadline)
+    space = _polish.Space(params0, names, scales, lower, upper, prior)
+    polished = _polish.polish(replays, space, theta_smooth, max_iter=polish_iter, deadline=deadline)
     theta_opt = polished.theta
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)
@@ -556,11 +557,11 @@ def fit_parameters(
     # parameter and step; they are skipped when the budget is spent.
     parts_cost = PART_STEPS * (2 * len(names) + 13) * polished.seconds_per_set
     parts_fit = uncertainty_parts and time.perf_counter() + parts_cost < t_start + time_budget
-    spread = _polish.part_spread(replays, params0, names, scales, theta_opt, lower, upper, prior, max_iter=PART_STEPS) if parts_fit else None
+    spread = _polish.part_spread(replays, space, theta_opt, max_iter=PART_STEPS) if parts_fit else None
     if spread is not None:
         # A flat stretch of the replay's cost (a threshold no push of the logs probes) hides from the
         # parts' spread; the profile of the cost around the answer shows it.
-        width = _polish.profile_width(replays, params0, names, scales, theta_opt, lower, upper, prior)
+        width = _polish.profile_width(replays, space, theta_opt)
         uncertainty = np.maximum(spread[0], width)
         uncertainty_method = f"spread of refits on {spread[1].shape[0]} parts of the logs, at least the width of the replay's cost profile"
     else:
