@@ -131,3 +131,32 @@ def test_model_exchange_offered_only_where_it_works(any_fmu, tmp_path):
     model.terminate()
     model.freeInstance()
     assert changed
+
+
+@pytest.mark.parametrize("name", ["plant", "plant3"])
+def test_model_exchange_vectors_of_another_size_are_refused(name, plant_fmu, plant3_fmu, tmp_path):
+    """States, derivatives and nominals are exchanged only with as many elements as the model has states,
+    in both FMI versions (one implementation, fmu_common.c, checks them for both)."""
+    fmu = {"plant": plant_fmu, "plant3": plant3_fmu}[name]
+    md = read_model_description(str(fmu))
+    cls = FMU3Model if is_fmi3(md) else FMU2Model
+    model = cls(guid=md.guid, unzipDirectory=extract(str(fmu), str(tmp_path / "me")),
+                modelIdentifier=md.modelExchange.modelIdentifier, instanceName="m")
+    model.instantiate()
+    initialize(model, md, {"alpha": 0.2})
+    (model.updateDiscreteStates if is_fmi3(md) else model.newDiscreteStates)()
+    model.enterContinuousTimeMode()
+    get_derivatives = model.getContinuousStateDerivatives if is_fmi3(md) else model.getDerivatives
+    calls = (model.getContinuousStates, model.setContinuousStates, get_derivatives, model.getNominalsOfContinuousStates)
+    n = md.numberOfContinuousStates if is_fmi3(md) else len(md.derivatives)
+    for call in calls:
+        for wrong in (n - 1, n + 1):
+            with pytest.raises(FMICallException):
+                call((ctypes.c_double * wrong)(), wrong)
+    x, nominals = (ctypes.c_double * n)(), (ctypes.c_double * n)()
+    model.getContinuousStates(x, n)
+    model.setContinuousStates(x, n)
+    model.getNominalsOfContinuousStates(nominals, n)
+    assert x[:] != [0.0] * n and nominals[:] == [1.0] * n
+    model.terminate()
+    model.freeInstance()

@@ -2,6 +2,7 @@
 
 The FMI 2.0 FMUs (Plant, Controller, Supervisor) use ``c/fmi2_wrapper.c``; the FMI 3.0 ones
 (:data:`~pendulab.fmu.models.FMI3_MODELS`, e.g. Plant3) the same model folder with ``c/fmi3_wrapper.c``.
+Both wrappers only translate their API: the FMI logic is ``c/fmu_common.c``'s, compiled into every FMU.
 
 Examples
 --------
@@ -38,6 +39,9 @@ WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
 _STAMP = "pendulab-build "
 #: The wrapper of each FMI version, and its binaries' platform folders (native Linux, win64).
 WRAPPERS = {2: "fmi2_wrapper.c", 3: "fmi3_wrapper.c"}
+#: The FMI logic both wrappers share, and the headers every FMU's sources/ carries (variables.h is generated).
+COMMON_SOURCE = "fmu_common.c"
+COMMON_HEADERS = ("fmu_model.h", "fmu_common.h")
 PLATFORM_DIRS = {2: {"Linux": "linux64", "Darwin": "darwin64", "Windows": "win64"},
                  3: {"Linux": "x86_64-linux", "Darwin": "x86_64-darwin", "Windows": "x86_64-windows"}}
 
@@ -126,7 +130,7 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
         root = Path(tmp) / "fmu"
         sources_dir = root / "sources"
         sources_dir.mkdir(parents=True)
-        for filename in ("fmu_model.h", wrapper):
+        for filename in (*COMMON_HEADERS, COMMON_SOURCE, wrapper):
             shutil.copy(WRAPPER_DIR / filename, sources_dir / filename)
         for path in model_dir(name).iterdir():
             if path.suffix in (".c", ".h"):
@@ -134,7 +138,7 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
         for filename, text in spec.generated.items():
             (sources_dir / filename).write_text(text)
         (sources_dir / "variables.h").write_text(variables_header(spec))
-        c_files = [wrapper, *spec.sources]
+        c_files = [wrapper, COMMON_SOURCE, *spec.sources]
         (root / "modelDescription.xml").write_text(model_description_xml(spec, c_files))
         (sources_dir / "buildDescription.xml").write_text(_build_description(spec.identifier, c_files))
 

@@ -1,20 +1,15 @@
-/* The FMI 3.0 wrapper (Model Exchange and Co-Simulation) around the same model code as fmi2_wrapper.c.
+/* The FMI 3.0 API of the FMI 3.0 pendulab FMUs (Model Exchange and Co-Simulation).
  *
- * As in the Modelica Reference-FMUs, one model (model.c, through fmu_model.h) serves both FMI versions;
- * this file owns what FMI 3.0 does differently: the instantiate functions, value references unique across
- * types (Float64, Int32, Boolean, then time and the event indicators: see variables.h, VR3_...), the
- * array-aware getters and setters, fmi3UpdateDiscreteStates and fmi3DoStep's extra results.
- * Scheduled Execution, clocks, FMU states and directional derivatives are not offered (the
- * modelDescription.xml says so) and answer with an error. */
-#include <stdarg.h>
-#include <stdio.h>
+ * As in the Modelica Reference-FMUs, one model (model.c, through fmu_model.h) and one implementation of the
+ * FMI logic (fmu_common.c) serve both FMI versions; this file, like fmi2_wrapper.c, only translates: the
+ * instantiate functions, value references unique across types (Float64, Int32, Boolean, then time and the
+ * event indicators: see variables.h, VR3_...), the array-aware getters and setters, and the results only
+ * FMI 3.0 has (fmi3UpdateDiscreteStates' and fmi3DoStep's). Scheduled Execution, clocks, FMU states and
+ * directional derivatives are not offered (the modelDescription.xml says so) and answer with an error. */
 #include <stdlib.h>
-#include <string.h>
 
 #include "fmi3Functions.h"
-#include "fmu_model.h"
-
-#define UNUSED(x) (void)(x)
+#include "fmu_common.h"
 
 /* The model's instance, then what only this wrapper needs. */
 typedef struct {
@@ -23,91 +18,37 @@ typedef struct {
     fmi3LogMessageCallback logger;
 } Component;
 
-void fmu_log(Instance *comp, Status status, const char *category, const char *message, ...) {
-    char buffer[1024];
-    va_list args;
+/* Status has fmi3Status's order. */
+#define STATUS(status) ((fmi3Status)(status))
+#define COMP ((Instance *)instance)
+#define NOT_SUPPORTED(what) return STATUS(fmu_not_supported(COMP, what))
+
+void fmu_log_message(Instance *comp, Status status, const char *category, const char *message) {
     Component *component = (Component *)comp;
-    if (!component || !component->logger) return;
-    if (!comp->logging_on && status == OK) return;
-    va_start(args, message);
-    vsnprintf(buffer, sizeof(buffer), message, args);
-    va_end(args);
-    component->logger(component->environment, (fmi3Status)status, category, buffer);
+    if (component->logger) component->logger(component->environment, STATUS(status), category, message);
 }
-
-static int in_mode(Instance *comp, const char *function, int allowed) {
-    if (!comp) return 0;
-    if (allowed & (1 << comp->mode)) return 1;
-    fmu_log(comp, Error, "logStatusError", "%s must not be called in the current state (mode %d)", function, (int)comp->mode);
-    return 0;
-}
-
-#define M(mode) (1 << (mode))
-#define ANY_MODE (M(MODE_INSTANTIATED) | M(MODE_INITIALIZATION) | M(MODE_STEP) | M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_TERMINATED))
-#define CHECK(function, allowed) \
-    do { if (!in_mode(comp, function, allowed)) return fmi3Error; } while (0)
-#define NOT_SUPPORTED(what)                                                                                \
-    do {                                                                                                  \
-        fmu_log((Instance *)instance, Error, "logStatusError", what " is not supported by this FMU");     \
-        return fmi3Error;                                                                                 \
-    } while (0)
 
 /* ------------------------------------------------------------------ inquire and log */
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories, const fmi3String categories[]) {
-    Instance *comp = (Instance *)instance;
     UNUSED(nCategories); UNUSED(categories);
-    if (!comp) return fmi3Error;
-    comp->logging_on = loggingOn ? 1 : 0;
-    return fmi3OK;
+    return STATUS(fmu_set_debug_logging(COMP, loggingOn));
 }
 
 /* ------------------------------------------------------------------ life cycle */
-static void set_start_values(Instance *comp) {
-    int k;
-    for (k = 0; k < N_REALS; k++) comp->r[k] = REAL_START[k];
-    for (k = 0; k < N_INTEGERS; k++) comp->i[k] = INTEGER_START[k];
-    for (k = 0; k < N_BOOLEANS; k++) comp->b[k] = BOOLEAN_START[k];
-    model_reset(comp);
-    comp->outputs_stale = 1;
-}
-
-static fmi3Instance instantiate(fmi3String instanceName, InterfaceType type, fmi3String instantiationToken,
+static fmi3Instance instantiate(const char *function, fmi3String instanceName, InterfaceType type, fmi3String instantiationToken,
                                 fmi3Boolean loggingOn, fmi3InstanceEnvironment environment, fmi3LogMessageCallback logger) {
     Component *component;
-    Instance *comp;
     if (!instanceName || !instantiationToken) return NULL;
-    if (strcmp(instantiationToken, MODEL_GUID) != 0) {
-        if (logger)
-            logger(environment, fmi3Error, "logStatusError",
-                   "wrong instantiationToken: the modelDescription.xml does not belong to this binary (expected " MODEL_GUID ")");
-        return NULL;
-    }
-#if N_STATES == 0
-    if (type == ModelExchange) {
-        if (logger) logger(environment, fmi3Error, "logStatusError", MODEL_NAME " supports Co-Simulation only");
-        return NULL;
-    }
-#endif
     component = (Component *)calloc(1, sizeof(Component));
     if (!component) return NULL;
-    comp = &component->model;
-    comp->instance_name = (const char *)malloc(strlen(instanceName) + 1);
-    if (!comp->instance_name) { free(component); return NULL; }
-    strcpy((char *)comp->instance_name, instanceName);
     component->environment = environment;
     component->logger = logger;
-    comp->type = type;
-    comp->logging_on = loggingOn ? 1 : 0;
-    comp->work = model_work_size() ? calloc(1, model_work_size()) : NULL;
-    if (model_work_size() && !comp->work) {
-        free((void *)comp->instance_name);
+    if (fmu_instantiate(&component->model, function, instanceName, instantiationToken, type, loggingOn) != OK) {
         free(component);
         return NULL;
     }
-    comp->mode = MODE_INSTANTIATED;
-    set_start_values(comp);
     return component;
 }
 
@@ -115,7 +56,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
     UNUSED(resourcePath); UNUSED(visible);
-    return instantiate(instanceName, ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate("fmi3InstantiateModelExchange", instanceName, ModelExchange, instantiationToken, loggingOn,
+                       instanceEnvironment, logMessage);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
@@ -132,7 +74,8 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                        "Co-Simulation without event mode and without intermediate variables only (hasEventMode=\"false\")");
         return NULL;
     }
-    return instantiate(instanceName, CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate("fmi3InstantiateCoSimulation", instanceName, CoSimulation, instantiationToken, loggingOn,
+                       instanceEnvironment, logMessage);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
@@ -146,173 +89,95 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 }
 
 void fmi3FreeInstance(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    if (!comp) return;
-    free(comp->work);
-    free((void *)comp->instance_name);
-    free((Component *)comp);
+    fmu_free_instance(COMP);
+    free(instance);
 }
 
+/* FMI 3.0 enters initialization mode and sets up the experiment in one call. */
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    Instance *comp = (Instance *)instance;
+    Status status;
     UNUSED(toleranceDefined); UNUSED(tolerance); UNUSED(stopTimeDefined); UNUSED(stopTime);
-    CHECK("fmi3EnterInitializationMode", M(MODE_INSTANTIATED));
-    comp->time = startTime;
-    comp->mode = MODE_INITIALIZATION;
-    return fmi3OK;
+    status = fmu_setup_experiment(COMP, "fmi3EnterInitializationMode", startTime);
+    if (status != OK) return STATUS(status);
+    return STATUS(fmu_enter_initialization_mode(COMP, "fmi3EnterInitializationMode"));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    Status status;
-    CHECK("fmi3ExitInitializationMode", M(MODE_INITIALIZATION));
-    status = model_initialize(comp);
-    if (status > Warning) return (fmi3Status)status;
-    comp->outputs_stale = 1;
-    /* Model Exchange continues in event mode; Co-Simulation without event mode in step mode. */
-    comp->mode = comp->type == CoSimulation ? MODE_STEP : MODE_EVENT;
-    return (fmi3Status)status;
+    return STATUS(fmu_exit_initialization_mode(COMP, "fmi3ExitInitializationMode"));
 }
-
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3EnterEventMode", M(MODE_EVENT) | M(MODE_CONTINUOUS));
-    comp->mode = MODE_EVENT;
-    return fmi3OK;
-}
-
-fmi3Status fmi3Terminate(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3Terminate", M(MODE_STEP) | M(MODE_EVENT) | M(MODE_CONTINUOUS));
-    comp->mode = MODE_TERMINATED;
-    return fmi3OK;
-}
-
-fmi3Status fmi3Reset(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3Reset", ANY_MODE);
-    comp->time = 0;
-    comp->mode = MODE_INSTANTIATED;
-    if (comp->work) memset(comp->work, 0, model_work_size());
-    set_start_values(comp);
-    return fmi3OK;
-}
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) { return STATUS(fmu_enter_event_mode(COMP, "fmi3EnterEventMode")); }
+fmi3Status fmi3Terminate(fmi3Instance instance) { return STATUS(fmu_terminate(COMP, "fmi3Terminate")); }
+fmi3Status fmi3Reset(fmi3Instance instance) { return STATUS(fmu_reset(COMP, "fmi3Reset")); }
 
 /* ------------------------------------------------------------------ variables */
-static void refresh(Instance *comp) {
-    if (comp->outputs_stale) {
-        model_update_outputs(comp);
-        comp->outputs_stale = 0;
-    }
-}
-
-static int check_sizes(Instance *comp, const char *function, const void *vr, size_t nvr, const void *values, size_t nValues) {
-    if (nvr > 0 && (!vr || !values)) return 0;
-    if (nValues != nvr) {  /* every variable is a scalar */
-        fmu_log(comp, Error, "logStatusError", "%s: %u values for %u scalar variables", function, (unsigned)nValues, (unsigned)nvr);
-        return 0;
-    }
-    return 1;
-}
-
+/* Float64 adds what FMI 3.0 declares as variables: the independent variable time and the event indicators. */
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[], size_t nValues) {
-    Instance *comp = (Instance *)instance;
     size_t k;
 #if N_EVENT_INDICATORS > 0
     double z[N_EVENT_INDICATORS];
     int have_z = 0;
 #endif
-    CHECK("fmi3GetFloat64", ANY_MODE);
-    if (!check_sizes(comp, "fmi3GetFloat64", vr, nvr, values, nValues)) return fmi3Error;
-    if (comp->mode != MODE_INSTANTIATED) refresh(comp);
+    if (fmu_begin_get(COMP, "fmi3GetFloat64", vr, nvr, values, nValues) != OK) return fmi3Error;
     for (k = 0; k < nvr; k++) {
-        if (vr[k] < VR3_REAL + N_REALS) {
-            values[k] = comp->r[vr[k] - VR3_REAL];
-        } else if (vr[k] == VR3_TIME) {
-            values[k] = comp->time;
+        if (vr[k] == VR3_TIME) {
+            values[k] = COMP->time;
 #if N_EVENT_INDICATORS > 0
         } else if (vr[k] >= VR3_INDICATORS && vr[k] < VR3_INDICATORS + N_EVENT_INDICATORS) {
-            if (!have_z) { model_get_event_indicators(comp, z); have_z = 1; }
+            if (!have_z) { model_get_event_indicators(COMP, z); have_z = 1; }
             values[k] = z[vr[k] - VR3_INDICATORS];
 #endif
         } else {
-            fmu_log(comp, Error, "logStatusError", "fmi3GetFloat64: %u is not the value reference of a Float64 variable", vr[k]);
-            return fmi3Error;
+            long index = fmu_index(COMP, "fmi3GetFloat64", REALS, vr[k], VR3_REAL, 0);
+            if (index < 0) return fmi3Error;
+            values[k] = COMP->r[index];
         }
     }
     return fmi3OK;
 }
 
-static int in_range(fmi3ValueReference vr, unsigned first, unsigned count) { return vr >= first && vr - first < count; }
+/* The other types the model has: Int32 (= the model's Integer) and Boolean (an int 0 or 1 in the model). */
+#define GETTER(Name, Type, array, Array, first, convert)                                                   \
+    fmi3Status Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, Type values[],      \
+                    size_t nValues) {                                                                     \
+        size_t k;                                                                                         \
+        if (fmu_begin_get(COMP, #Name, vr, nvr, values, nValues) != OK) return fmi3Error;                 \
+        for (k = 0; k < nvr; k++) {                                                                       \
+            long index = fmu_index(COMP, #Name, Array, vr[k], first, 0);                                  \
+            if (index < 0) return fmi3Error;                                                              \
+            values[k] = convert(COMP->array[index]);                                                      \
+        }                                                                                                 \
+        return fmi3OK;                                                                                    \
+    }
 
-/* The variables the importer may set: Float64 (= the model's Real), Int32 (Integer), Boolean.
- * Fixed parameters only before the end of initialization (as fmi2_wrapper.c). */
-#define SETTER(Name, Type, array, first, count, fixed, convert)                                             \
+#define SETTER(Name, Type, array, Array, first, convert)                                                   \
     fmi3Status Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const Type values[], \
                     size_t nValues) {                                                                     \
-        Instance *comp = (Instance *)instance;                                                            \
         size_t k;                                                                                         \
-        int initialized;                                                                                  \
-        CHECK(#Name, M(MODE_INSTANTIATED) | M(MODE_INITIALIZATION) | M(MODE_STEP) | M(MODE_EVENT) |      \
-                         M(MODE_CONTINUOUS));                                                             \
-        if (!check_sizes(comp, #Name, vr, nvr, values, nValues)) return fmi3Error;                        \
-        initialized = comp->mode != MODE_INSTANTIATED && comp->mode != MODE_INITIALIZATION;               \
+        if (fmu_begin_set(COMP, #Name, vr, nvr, values, nValues) != OK) return fmi3Error;                 \
         for (k = 0; k < nvr; k++) {                                                                       \
-            if (!in_range(vr[k], (first), (count))) {                                                     \
-                fmu_log(comp, Error, "logStatusError", #Name ": %u is not the value reference of a "      \
-                        "variable of this type that can be set", vr[k]);                                  \
-                return fmi3Error;                                                                         \
-            }                                                                                             \
-            if (initialized && fixed[vr[k] - (first)]) {                                                  \
-                fmu_log(comp, Error, "logStatusError",                                                   \
-                        #Name ": value reference %u is a fixed parameter; set it before initialization",  \
-                        vr[k]);                                                                           \
-                return fmi3Error;                                                                         \
-            }                                                                                             \
-            comp->array[vr[k] - (first)] = convert(values[k]);                                            \
+            long index = fmu_index(COMP, #Name, Array, vr[k], first, 1);                                  \
+            if (index < 0) return fmi3Error;                                                              \
+            COMP->array[index] = convert(values[k]);                                                      \
         }                                                                                                 \
-        comp->outputs_stale = 1;                                                                          \
         return fmi3OK;                                                                                    \
     }
 
 #define AS_IS(x) (x)
-#define AS_INT_BOOLEAN(x) ((x) ? 1 : 0)
-SETTER(fmi3SetFloat64, fmi3Float64, r, VR3_REAL, N_REALS, REAL_FIXED, AS_IS)
-SETTER(fmi3SetInt32, fmi3Int32, i, VR3_INTEGER, N_INTEGERS, INTEGER_FIXED, AS_IS)
-SETTER(fmi3SetBoolean, fmi3Boolean, b, VR3_BOOLEAN, N_BOOLEANS, BOOLEAN_FIXED, AS_INT_BOOLEAN)
-
-#define GETTER(Name, Type, array, first, count, convert)                                                   \
-    fmi3Status Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, Type values[],      \
-                    size_t nValues) {                                                                     \
-        Instance *comp = (Instance *)instance;                                                            \
-        size_t k;                                                                                         \
-        CHECK(#Name, ANY_MODE);                                                                           \
-        if (!check_sizes(comp, #Name, vr, nvr, values, nValues)) return fmi3Error;                        \
-        if (comp->mode != MODE_INSTANTIATED) refresh(comp);                                               \
-        for (k = 0; k < nvr; k++) {                                                                       \
-            if (!in_range(vr[k], (first), (count))) {                                                     \
-                fmu_log(comp, Error, "logStatusError", #Name ": %u is not the value reference of a "      \
-                        "variable of this type", vr[k]);                                                  \
-                return fmi3Error;                                                                         \
-            }                                                                                             \
-            values[k] = convert(comp->array[vr[k] - (first)]);                                            \
-        }                                                                                                 \
-        return fmi3OK;                                                                                    \
-    }
-
-#define AS_BOOLEAN(x) ((x) != 0)
-GETTER(fmi3GetInt32, fmi3Int32, i, VR3_INTEGER, N_INTEGERS, AS_IS)
-GETTER(fmi3GetBoolean, fmi3Boolean, b, VR3_BOOLEAN, N_BOOLEANS, AS_BOOLEAN)
+#define TO_BOOLEAN(x) ((x) != 0)
+#define FROM_BOOLEAN(x) ((x) ? 1 : 0)
+GETTER(fmi3GetInt32, fmi3Int32, i, INTEGERS, VR3_INTEGER, AS_IS)
+GETTER(fmi3GetBoolean, fmi3Boolean, b, BOOLEANS, VR3_BOOLEAN, TO_BOOLEAN)
+SETTER(fmi3SetFloat64, fmi3Float64, r, REALS, VR3_REAL, AS_IS)
+SETTER(fmi3SetInt32, fmi3Int32, i, INTEGERS, VR3_INTEGER, AS_IS)
+SETTER(fmi3SetBoolean, fmi3Boolean, b, BOOLEANS, VR3_BOOLEAN, FROM_BOOLEAN)
 
 /* Types the model has no variables of: nothing to get or set (an empty call is fine). */
 #define NO_VARIABLES(Name, Type)                                                                           \
     fmi3Status Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, Type values[],      \
                     size_t nValues) {                                                                     \
         UNUSED(vr); UNUSED(values); UNUSED(nValues);                                                      \
-        if (nvr == 0) return fmi3OK;                                                                      \
-        fmu_log((Instance *)instance, Error, "logStatusError", #Name ": this model has no such variables"); \
-        return fmi3Error;                                                                                 \
+        return STATUS(fmu_no_variables(COMP, #Name, nvr));                                                \
     }
 
 NO_VARIABLES(fmi3GetFloat32, fmi3Float32)
@@ -449,178 +314,79 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
 
 /* ------------------------------------------------------------------ events (Model Exchange) */
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3EvaluateDiscreteStates", M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_STEP));
+    if (!fmu_check_mode(COMP, "fmi3EvaluateDiscreteStates", MODE_BIT(MODE_EVENT) | MODE_BIT(MODE_CONTINUOUS) | MODE_BIT(MODE_STEP)))
+        return fmi3Error;
     return fmi3OK;  /* no clocked partitions: nothing to evaluate */
 }
 
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate, fmi3Boolean *terminateSimulation,
                                     fmi3Boolean *nominalsOfContinuousStatesChanged, fmi3Boolean *valuesOfContinuousStatesChanged,
                                     fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime) {
-    Instance *comp = (Instance *)instance;
-    int states_changed = 0;
-    double next = -1;
-    CHECK("fmi3UpdateDiscreteStates", M(MODE_EVENT));
-#if N_EVENT_INDICATORS > 0
-    {
-        Status status = model_event_update(comp, &states_changed);
-        if (status > Warning) return (fmi3Status)status;
-    }
-#endif
-#if N_STATES > 0
-    next = model_next_time_event(comp);
-#endif
-    /* The model iterates its discrete update to a fixed point itself: one call is enough. */
+    int states_changed;
+    double next;
+    Status status = fmu_update_discrete_states(COMP, "fmi3UpdateDiscreteStates", &states_changed, &next);
     if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
     if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = states_changed ? fmi3True : fmi3False;
     if (nextEventTimeDefined) *nextEventTimeDefined = next >= 0 ? fmi3True : fmi3False;
     if (nextEventTime) *nextEventTime = next >= 0 ? next : 0;
-    comp->outputs_stale = 1;
-    return fmi3OK;
+    return STATUS(status);
 }
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3EnterContinuousTimeMode", M(MODE_EVENT));
-    if (comp->type != ModelExchange) {
-        fmu_log(comp, Error, "logStatusError", "fmi3EnterContinuousTimeMode: only for Model Exchange");
-        return fmi3Error;
-    }
-    comp->mode = MODE_CONTINUOUS;
-    return fmi3OK;
+    return STATUS(fmu_enter_continuous_time_mode(COMP, "fmi3EnterContinuousTimeMode"));
 }
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
-    Instance *comp = (Instance *)instance;
     UNUSED(noSetFMUStatePriorToCurrentPoint);
-    CHECK("fmi3CompletedIntegratorStep", M(MODE_CONTINUOUS));
     if (enterEventMode) *enterEventMode = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
-    return fmi3OK;
+    return STATUS(fmu_completed_integrator_step(COMP, "fmi3CompletedIntegratorStep"));
 }
 
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3SetTime", M(MODE_EVENT) | M(MODE_CONTINUOUS));
-    comp->time = time;
-    comp->outputs_stale = 1;
-    return fmi3OK;
-}
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { return STATUS(fmu_set_time(COMP, "fmi3SetTime", time)); }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 x[], size_t nx) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3SetContinuousStates", M(MODE_CONTINUOUS));
-#if N_STATES > 0
-    if (nx != N_STATES || !x) return fmi3Error;
-    model_set_states(comp, x);
-    comp->outputs_stale = 1;
-    return fmi3OK;
-#else
-    UNUSED(x); UNUSED(nx);
-    return fmi3Error;
-#endif
+    return STATUS(fmu_set_continuous_states(COMP, "fmi3SetContinuousStates", x, nx));
 }
-
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[], size_t nx) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3GetContinuousStateDerivatives", M(MODE_INITIALIZATION) | M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_TERMINATED));
-#if N_STATES > 0
-    if (nx != N_STATES || !derivatives) return fmi3Error;
-    model_get_derivatives(comp, derivatives);
-    return fmi3OK;
-#else
-    UNUSED(derivatives); UNUSED(nx);
-    return fmi3Error;
-#endif
+    return STATUS(fmu_get_derivatives(COMP, "fmi3GetContinuousStateDerivatives", derivatives, nx));
 }
-
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t ni) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3GetEventIndicators", M(MODE_INITIALIZATION) | M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_TERMINATED));
-    if (ni != N_EVENT_INDICATORS) {
-        fmu_log(comp, Error, "logStatusError", "fmi3GetEventIndicators: %u indicators asked, the model has %d",
-                (unsigned)ni, N_EVENT_INDICATORS);
-        return fmi3Error;
-    }
-#if N_EVENT_INDICATORS > 0
-    model_get_event_indicators(comp, eventIndicators);
-#else
-    UNUSED(eventIndicators);
-#endif
-    return fmi3OK;
+    return STATUS(fmu_get_event_indicators(COMP, "fmi3GetEventIndicators", eventIndicators, ni));
 }
-
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 states[], size_t nx) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3GetContinuousStates", M(MODE_INITIALIZATION) | M(MODE_EVENT) | M(MODE_CONTINUOUS) | M(MODE_TERMINATED));
-#if N_STATES > 0
-    if (nx != N_STATES || !states) return fmi3Error;
-    model_get_states(comp, states);
-    return fmi3OK;
-#else
-    UNUSED(states); UNUSED(nx);
-    return fmi3Error;
-#endif
+    return STATUS(fmu_get_continuous_states(COMP, "fmi3GetContinuousStates", states, nx));
 }
-
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[], size_t nx) {
-    Instance *comp = (Instance *)instance;
-    size_t k;
-    CHECK("fmi3GetNominalsOfContinuousStates", ANY_MODE);
-    if (nx != N_STATES || (nx > 0 && !nominals)) return fmi3Error;
-    for (k = 0; k < nx; k++) nominals[k] = 1.0;
-    return fmi3OK;
+    return STATUS(fmu_get_nominals(COMP, "fmi3GetNominalsOfContinuousStates", nominals, nx));
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3GetNumberOfEventIndicators", ANY_MODE);
-    if (!nEventIndicators) return fmi3Error;
+    if (!fmu_check_mode(COMP, "fmi3GetNumberOfEventIndicators", ANY_MODE) || !nEventIndicators) return fmi3Error;
     *nEventIndicators = N_EVENT_INDICATORS;
     return fmi3OK;
 }
-
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3GetNumberOfContinuousStates", ANY_MODE);
-    if (!nContinuousStates) return fmi3Error;
+    if (!fmu_check_mode(COMP, "fmi3GetNumberOfContinuousStates", ANY_MODE) || !nContinuousStates) return fmi3Error;
     *nContinuousStates = N_STATES;
     return fmi3OK;
 }
 
 /* ------------------------------------------------------------------ Co-Simulation */
-fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    CHECK("fmi3EnterStepMode", M(MODE_EVENT));
-    if (comp->type != CoSimulation) {
-        fmu_log(comp, Error, "logStatusError", "fmi3EnterStepMode: only for Co-Simulation");
-        return fmi3Error;
-    }
-    comp->mode = MODE_STEP;
-    return fmi3OK;
-}
+fmi3Status fmi3EnterStepMode(fmi3Instance instance) { return STATUS(fmu_enter_step_mode(COMP, "fmi3EnterStepMode")); }
 
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
-    Instance *comp = (Instance *)instance;
     Status status;
     UNUSED(noSetFMUStatePriorToCurrentPoint);
-    CHECK("fmi3DoStep", M(MODE_STEP));
-    if (communicationStepSize <= 0) {
-        fmu_log(comp, Error, "logStatusError", "fmi3DoStep: step size %g must be positive", communicationStepSize);
-        return fmi3Error;
-    }
-    /* The same step as FMI 2.0: the model resolves its switches inside the step (no event mode). */
-    status = model_do_step(comp, currentCommunicationPoint, communicationStepSize);
-    comp->time = currentCommunicationPoint + communicationStepSize;
-    comp->outputs_stale = 1;
+    status = fmu_do_step(COMP, "fmi3DoStep", currentCommunicationPoint, communicationStepSize);
     if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (earlyReturn) *earlyReturn = fmi3False;
-    if (lastSuccessfulTime) *lastSuccessfulTime = status <= Warning ? comp->time : currentCommunicationPoint;
-    return (fmi3Status)status;
+    if (lastSuccessfulTime) *lastSuccessfulTime = status <= Warning ? COMP->time : currentCommunicationPoint;
+    return STATUS(status);
 }

@@ -1,5 +1,6 @@
-/* The contract between one model and the FMI wrappers that serve it: fmi2_wrapper.c (FMI 2.0) and
- * fmi3_wrapper.c (FMI 3.0), as the Modelica Reference-FMUs serve both versions from one model code base.
+/* The contract between one model and the FMI code that serves it: fmu_common.c (the FMI logic) behind
+ * fmi2_wrapper.c (FMI 2.0) and fmi3_wrapper.c (FMI 3.0), as the Modelica Reference-FMUs serve both versions
+ * from one model code base.
  *
  * Nothing here depends on an FMI version: the status and interface types are the model's own, and each
  * wrapper translates them to its API (Status has the order of fmi2Status and fmi3Status).
@@ -25,7 +26,8 @@ typedef enum { OK, Warning, Discard, Error, Fatal } Status;
 typedef enum { ModelExchange, CoSimulation } InterfaceType;
 typedef enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_EVENT, MODE_CONTINUOUS, MODE_TERMINATED } Mode;
 
-/* A wrapper allocates its own struct with an Instance as first member (its callbacks after it). */
+/* A wrapper allocates its own struct with an Instance as first member (its callbacks after it);
+ * fmu_common.c fills and checks the Instance. */
 typedef struct {
     double time;
     double r[N_REALS];
@@ -59,7 +61,7 @@ void model_get_event_indicators(Instance *comp, double z[]);
 Status model_event_update(Instance *comp, int *states_changed);
 #endif
 
-/* ---- provided by the wrapper ---- */
+/* ---- provided by fmu_common.c (a message with status OK only while the importer has logging on) ---- */
 void fmu_log(Instance *comp, Status status, const char *category, const char *message, ...);
 
 #endif

@@ -12,7 +12,7 @@ typedef struct {
 
 size_t model_work_size(void) { return sizeof(Work); }
 
-void model_reset(Instance *comp) { (void)comp; /* the wrapper zeroes the work memory */ }
+void model_reset(Instance *comp) { (void)comp; /* fmu_common.c zeroes the work memory */ }
 
 Status model_initialize(Instance *comp) {
     int n = comp->i[VR_n], k;
