@@ -160,19 +160,8 @@ def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
         return model_description_fmi3_xml(spec)
     refs = spec.value_references()
     index = {v.name: k + 1 for k, v in enumerate(spec.variables)}
-    units = sorted({v.unit for v in spec.variables if v.unit})
     files = "".join(f'\n      <File name="{name}"/>' for name in source_files)
-    lines = [
-        '<?xml version="1.0" encoding="UTF-8"?>',
-        "<fmiModelDescription",
-        '  fmiVersion="2.0"',
-        f"  modelName={quoteattr(spec.identifier)}",
-        f'  guid="{spec.guid}"',
-        f"  description={quoteattr(spec.description)}",
-        f'  generationTool="{GENERATOR}"',
-        '  variableNamingConvention="structured"',
-        f'  numberOfEventIndicators="{spec.event_indicators}">',
-    ]
+    lines = _root_element(spec, "2.0", "guid", f'numberOfEventIndicators="{spec.event_indicators}"')
     if spec.model_exchange:
         lines.append(
             f'  <ModelExchange modelIdentifier="{spec.identifier}" canNotUseMemoryManagementFunctions="true">'
@@ -183,54 +172,21 @@ def model_description_xml(spec: ModelSpec, source_files: Sequence[str]) -> str:
         f' canNotUseMemoryManagementFunctions="true">'
         f"\n    <SourceFiles>{files}\n    </SourceFiles>\n  </CoSimulation>"
     )
-    if units:
-        lines.append("  <UnitDefinitions>")
-        lines += [f"    <Unit name={quoteattr(u)}/>" for u in units]
-        lines.append("  </UnitDefinitions>")
-    lines.append("  <LogCategories>")
-    lines.append('    <Category name="logStatusError" description="Errors"/>')
-    lines.append('    <Category name="logEvents" description="State changes and events"/>')
-    lines.append("  </LogCategories>")
-    lines.append(f'  <DefaultExperiment startTime="0" stopTime="10" stepSize="{spec.default_step!r}"/>')
+    lines += _units_categories_experiment(spec, sorted({v.unit for v in spec.variables if v.unit}))
     lines.append("  <ModelVariables>")
     for v in spec.variables:
-        attrs = [f"name={quoteattr(v.name)}", f'valueReference="{refs[v.name]}"']
-        if v.description:
-            attrs.append(f"description={quoteattr(v.description)}")
-        attrs.append(f'causality="{v.causality}"')
-        attrs.append(f'variability="{v.resolved_variability}"')
-        if v.initial:
-            attrs.append(f'initial="{v.initial}"')
-        inner = []
-        if v.unit and v.type == "Real":
-            inner.append(f"unit={quoteattr(v.unit)}")
-        if v.derivative_of:
-            inner.append(f'derivative="{index[v.derivative_of]}"')
-        if v.start is not None:
-            if isinstance(v.start, float) and not math.isfinite(v.start):
-                raise ValueError(f"start value of {v.name} must be finite")
-            inner.append(f'start="{_literal(v.start)}"')
+        # FMI 2.0: the variable's attributes on ScalarVariable, its type's (unit, derivative, start) inside.
+        inner = _type_attributes(v, index[v.derivative_of] if v.derivative_of else None)
         lines.append(f"    <!-- {index[v.name]} -->")
-        lines.append(f"    <ScalarVariable {' '.join(attrs)}>")
+        lines.append(f"    <ScalarVariable {' '.join(_variable_attributes(v, refs[v.name]))}>")
         lines.append(f"      <{v.type} {' '.join(inner)}/>")
         lines.append("    </ScalarVariable>")
     lines.append("  </ModelVariables>")
     lines.append("  <ModelStructure>")
-    outputs = [v for v in spec.variables if v.causality == "output"]
-    if outputs:
-        lines.append("    <Outputs>")
-        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in outputs]
-        lines.append("    </Outputs>")
-    derivatives = [v for v in spec.variables if v.derivative_of]
-    if derivatives:
-        lines.append("    <Derivatives>")
-        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in derivatives]
-        lines.append("    </Derivatives>")
-    initial_unknowns = _initial_unknowns(spec)
-    if initial_unknowns:
-        lines.append("    <InitialUnknowns>")
-        lines += [f'      <Unknown index="{index[v.name]}"/>' for v in initial_unknowns]
-        lines.append("    </InitialUnknowns>")
+    for tag, unknowns in (("Outputs", [v for v in spec.variables if v.causality == "output"]),
+                          ("Derivatives", [v for v in spec.variables if v.derivative_of]),
+                          ("InitialUnknowns", _initial_unknowns(spec))):
+        lines += _optional_element(tag, [f'<Unknown index="{index[v.name]}"/>' for v in unknowns], "    ")
     lines.append("  </ModelStructure>")
     lines.append("</fmiModelDescription>")
     return "\n".join(lines) + "\n"
@@ -246,51 +202,22 @@ def model_description_fmi3_xml(spec: ModelSpec) -> str:
     list here: ``sources/buildDescription.xml`` lists them.
     """
     refs = spec.value_references_fmi3()
-    units = sorted({v.unit for v in spec.variables if v.unit} | {"s"})
     indicators = [f"event_indicator.{n}" for n in spec.indicator_names()] if spec.model_exchange else []
-    lines = [
-        '<?xml version="1.0" encoding="UTF-8"?>',
-        "<fmiModelDescription",
-        '  fmiVersion="3.0"',
-        f"  modelName={quoteattr(spec.identifier)}",
-        f'  instantiationToken="{spec.guid}"',
-        f"  description={quoteattr(spec.description)}",
-        f'  generationTool="{GENERATOR}"',
-        '  variableNamingConvention="structured">',
-    ]
+    lines = _root_element(spec, "3.0", "instantiationToken")
     if spec.model_exchange:
         lines.append(f'  <ModelExchange modelIdentifier="{spec.identifier}"/>')
     lines.append(
         f'  <CoSimulation modelIdentifier="{spec.identifier}"'
         f' canHandleVariableCommunicationStepSize="{_literal(spec.variable_step)}"/>'
     )
-    lines.append("  <UnitDefinitions>")
-    lines += [f"    <Unit name={quoteattr(u)}/>" for u in units]
-    lines.append("  </UnitDefinitions>")
-    lines.append("  <LogCategories>")
-    lines.append('    <Category name="logStatusError" description="Errors"/>')
-    lines.append('    <Category name="logEvents" description="State changes and events"/>')
-    lines.append("  </LogCategories>")
-    lines.append(f'  <DefaultExperiment startTime="0" stopTime="10" stepSize="{spec.default_step!r}"/>')
+    # time is a variable of unit s in FMI 3.0
+    lines += _units_categories_experiment(spec, sorted({v.unit for v in spec.variables if v.unit} | {"s"}))
     lines.append("  <ModelVariables>")
     lines.append(f'    <Float64 name="time" valueReference="{refs["time"]}" causality="independent" variability="continuous"'
                  ' description="Simulation time" unit="s"/>')
     for v in spec.variables:
-        attrs = [f"name={quoteattr(v.name)}", f'valueReference="{refs[v.name]}"']
-        if v.description:
-            attrs.append(f"description={quoteattr(v.description)}")
-        attrs.append(f'causality="{v.causality}"')
-        attrs.append(f'variability="{v.resolved_variability}"')
-        if v.initial:
-            attrs.append(f'initial="{v.initial}"')
-        if v.unit and v.type == "Real":
-            attrs.append(f"unit={quoteattr(v.unit)}")
-        if v.derivative_of:
-            attrs.append(f'derivative="{refs[v.derivative_of]}"')
-        if v.start is not None:
-            if isinstance(v.start, float) and not math.isfinite(v.start):
-                raise ValueError(f"start value of {v.name} must be finite")
-            attrs.append(f'start="{_literal(v.start)}"')
+        # FMI 3.0: all attributes on the one element named after the type.
+        attrs = _variable_attributes(v, refs[v.name]) + _type_attributes(v, refs[v.derivative_of] if v.derivative_of else None)
         lines.append(f"    <{_FMI3_TYPES[v.type]} {' '.join(attrs)}/>")
     for name, short in zip(indicators, spec.indicator_names()):
         lines.append(f"    <Float64 name={quoteattr(name)} valueReference=\"{refs[name]}\" causality=\"local\" variability=\"continuous\""
@@ -304,6 +231,68 @@ def model_description_fmi3_xml(spec: ModelSpec) -> str:
     lines.append("  </ModelStructure>")
     lines.append("</fmiModelDescription>")
     return "\n".join(lines) + "\n"
+
+
+def _root_element(spec: ModelSpec, fmi_version: str, token: str, *extra: str) -> list[str]:
+    """The XML declaration and the opening ``fmiModelDescription`` tag; ``token`` names the GUID's attribute
+    (``guid`` in FMI 2.0, ``instantiationToken`` in FMI 3.0), ``extra`` are attributes only one version has."""
+    attributes = [
+        f'fmiVersion="{fmi_version}"',
+        f"modelName={quoteattr(spec.identifier)}",
+        f'{token}="{spec.guid}"',
+        f"description={quoteattr(spec.description)}",
+        f'generationTool="{GENERATOR}"',
+        'variableNamingConvention="structured"',
+        *extra,
+    ]
+    return ['<?xml version="1.0" encoding="UTF-8"?>', "<fmiModelDescription", *(f"  {a}" for a in attributes[:-1]),
+            f"  {attributes[-1]}>"]
+
+
+def _units_categories_experiment(spec: ModelSpec, units: Sequence[str]) -> list[str]:
+    """The elements between the interfaces and the variables, the same in FMI 2.0 and 3.0."""
+    lines = _optional_element("UnitDefinitions", [f"<Unit name={quoteattr(u)}/>" for u in units], "  ")
+    lines.append("  <LogCategories>")
+    lines.append('    <Category name="logStatusError" description="Errors"/>')
+    lines.append('    <Category name="logEvents" description="State changes and events"/>')
+    lines.append("  </LogCategories>")
+    lines.append(f'  <DefaultExperiment startTime="0" stopTime="10" stepSize="{spec.default_step!r}"/>')
+    return lines
+
+
+def _optional_element(tag: str, children: list[str], indent: str) -> list[str]:
+    """``<tag>`` at ``indent`` around ``children`` (one line each, indented a level deeper), or nothing if
+    there are none."""
+    if not children:
+        return []
+    return [f"{indent}<{tag}>", *(f"{indent}  {c}" for c in children), f"{indent}</{tag}>"]
+
+
+def _variable_attributes(v: Variable, ref: int) -> list[str]:
+    """A variable's own attributes (name, value reference, description, causality, variability, initial)."""
+    attrs = [f"name={quoteattr(v.name)}", f'valueReference="{ref}"']
+    if v.description:
+        attrs.append(f"description={quoteattr(v.description)}")
+    attrs.append(f'causality="{v.causality}"')
+    attrs.append(f'variability="{v.resolved_variability}"')
+    if v.initial:
+        attrs.append(f'initial="{v.initial}"')
+    return attrs
+
+
+def _type_attributes(v: Variable, derivative: int | None) -> list[str]:
+    """The attributes of a variable's type: unit, ``derivative`` (the state's index in FMI 2.0, its value
+    reference in FMI 3.0) and start."""
+    attrs = []
+    if v.unit and v.type == "Real":
+        attrs.append(f"unit={quoteattr(v.unit)}")
+    if derivative is not None:
+        attrs.append(f'derivative="{derivative}"')
+    if v.start is not None:
+        if isinstance(v.start, float) and not math.isfinite(v.start):
+            raise ValueError(f"start value of {v.name} must be finite")
+        attrs.append(f'start="{_literal(v.start)}"')
+    return attrs
 
 
 def _initial_unknowns(spec: ModelSpec) -> list[Variable]:
