@@ -2,7 +2,7 @@
 
 One plain C host (tests/hosts/fmu_host.c) is built natively and with mingw-w64; each runs the same
 reference cases (the plant's open-loop case, plant and controller in a loop) on its platform's binaries.
-The FMI 3.0 plant (Plant3) is in the platform and import checks; the host speaks FMI 2.0 only.
+The FMI 3.0 plant (Plant3) has its own host (tests/hosts/fmi3_host.c): Co-Simulation and Model Exchange.
 """
 
 from __future__ import annotations
@@ -49,6 +49,21 @@ def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supe
         assert imports == {"kernel32.dll", "msvcrt.dll"}, (fmu.name, imports)
 
 
+def _run_host(source: Path, windows: bool, folder: Path, arguments: list[str]) -> list[np.ndarray]:
+    """Compile the C host ``source`` for linux64 (cc) or win64 (mingw-w64) and run it, the win64 one under Wine,
+    with ``arguments`` (its binaries must already be in ``folder``): the numbers of its last two lines."""
+    exe = folder / (source.stem + (".exe" if windows else ""))
+    compiler, libs = (WIN64_COMPILER, ["-lm"]) if windows else ("cc", ["-ldl", "-lm"])
+    subprocess.run([compiler, "-std=c99", "-O1", f"-I{FMI_HEADERS}", str(source), "-o", str(exe), *libs],
+                   check=True, capture_output=True)
+    command = [WINE, str(exe)] if windows else [str(exe)]
+    env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(folder.parent / "wineprefix")}
+    run = subprocess.run(command + arguments, capture_output=True, text=True, timeout=300, env=env)
+    assert run.returncode == 0, (exe.name, run.stdout, run.stderr)
+    lines = [line for line in run.stdout.splitlines() if line.strip()]
+    return [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
+
+
 def _arguments(fmus: tuple[Path, Path, Path], folder: Path, platform_dir: str) -> list[str]:
     args = []
     for fmu in fmus:
@@ -66,19 +81,11 @@ def _arguments(fmus: tuple[Path, Path, Path], folder: Path, platform_dir: str) -
 def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, supervisor_fmu, tmp_path):
     """The plant's open-loop case and the loop of the three FMUs: Wine's results equal linux64's to 1e-12."""
     results = {}
-    for platform_dir, compiler, out in (("linux64", "cc", "host"), ("win64", WIN64_COMPILER, "host.exe")):
+    for platform_dir in ("linux64", "win64"):
         folder = tmp_path / platform_dir
         folder.mkdir()
-        libs = ["-ldl", "-lm"] if platform_dir == "linux64" else ["-lm"]
-        subprocess.run([compiler, "-std=c99", "-O1", f"-I{FMI_HEADERS}", str(HOST), "-o", str(folder / out), *libs],
-                       check=True, capture_output=True)
-        command = [str(folder / out)] if platform_dir == "linux64" else [WINE, str(folder / out)]
-        env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wineprefix")}
-        run = subprocess.run(command + _arguments((plant_fmu, controller_fmu, supervisor_fmu), folder, platform_dir),
-                             capture_output=True, text=True, timeout=300, env=env)
-        assert run.returncode == 0, (platform_dir, run.stdout, run.stderr)
-        lines = [line for line in run.stdout.splitlines() if line.strip()]
-        results[platform_dir] = [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
+        arguments = _arguments((plant_fmu, controller_fmu, supervisor_fmu), folder, platform_dir)
+        results[platform_dir] = _run_host(HOST, platform_dir == "win64", folder, arguments)
     for linux, windows in zip(results["linux64"], results["win64"]):
         assert np.all(np.isfinite(linux)) and np.any(linux != 0)
         print("\nlinux64", linux, "\nwin64  ", windows, "\nmax |difference|", np.max(np.abs(windows - linux)))
@@ -121,21 +128,13 @@ def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_f
     refs = {v.name: v.valueReference for v in md.modelVariables}
     steps = 1500
     results = {}
-    for platform_dir, compiler, out in (("x86_64-linux", "cc", "host3"), ("x86_64-windows", WIN64_COMPILER, "host3.exe")):
+    for platform_dir in ("x86_64-linux", "x86_64-windows"):
         folder = tmp_path / platform_dir
         folder.mkdir()
-        libs = ["-ldl", "-lm"] if platform_dir == "x86_64-linux" else ["-lm"]
-        subprocess.run([compiler, "-std=c99", "-O1", f"-I{FMI_HEADERS}", str(HOST3), "-o", str(folder / out), *libs],
-                       check=True, capture_output=True)
         binary = folder / f"Plant3{SUFFIX3[platform_dir]}"
         binary.write_bytes(zipfile.ZipFile(plant3_fmu).read(f"binaries/{platform_dir}/{binary.name}"))
-        command = [str(folder / out)] if platform_dir == "x86_64-linux" else [WINE, str(folder / out)]
-        env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wineprefix")}
         arguments = [str(binary), md.guid, str(steps), *(str(refs[n]) for n in ("V", "x", "xdot", "alpha", "alphadot"))]
-        run = subprocess.run(command + arguments, capture_output=True, text=True, timeout=300, env=env)
-        assert run.returncode == 0, (platform_dir, run.stdout, run.stderr)
-        lines = [line for line in run.stdout.splitlines() if line.strip()]
-        results[platform_dir] = [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
+        results[platform_dir] = _run_host(HOST3, platform_dir == "x86_64-windows", folder, arguments)
     linux, windows = results["x86_64-linux"], results["x86_64-windows"]
     state_events, time_events = linux[1][4:]
     assert state_events > 0 and time_events == 2, "Model Exchange met friction switches and the poke's two edges"

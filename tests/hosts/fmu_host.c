@@ -11,17 +11,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
-#ifdef _WIN32
-#include <windows.h>
-typedef HMODULE Library;
-static Library open_library(const char *path) { return LoadLibraryA(path); }
-static void *symbol(Library lib, const char *name) { return (void *)GetProcAddress(lib, name); }
-#else
-#include <dlfcn.h>
-typedef void *Library;
-static Library open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
-static void *symbol(Library lib, const char *name) { return dlsym(lib, name); }
-#endif
+#include "library.h"
 #include "fmi2Functions.h"
 
 #define PI 3.14159265358979323846
