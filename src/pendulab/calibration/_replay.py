@@ -32,6 +32,8 @@ from pendulab.model.plant import MAX_SUBSTEP, _step_function, substeps
 
 #: Samples per compiled call.
 CHUNK = 500
+#: Numbers of parameter sets compiled for (each a library built once per machine); others are padded.
+SET_COUNTS = (1, 16, 32)
 
 
 @lru_cache(maxsize=None)
@@ -81,6 +83,7 @@ def replay(
     restarts: dict[int, np.ndarray] | None = None,
     *,
     free: Sequence[str] | None = None,
+    max_substep: float = MAX_SUBSTEP,
     compile: bool = True,
 ) -> np.ndarray:
     """States after each logged sample for one or several parameter sets, ``(m, n, 4)``.
@@ -115,8 +118,16 @@ def replay(
         np.array([q.as_vector() for q in params], dtype=float) if isinstance(params, list) and params and isinstance(params[0], PlantParameters) else np.asarray(params, dtype=float)
     )
     m, n = vectors.shape[0], len(V)
+    if m not in SET_COUNTS:
+        # A few compiled widths serve any number of sets: pad with copies of the first, or split.
+        width = next((w for w in SET_COUNTS if w >= m), SET_COUNTS[-1])
+        if m > width:
+            return np.concatenate([replay(vectors[i : i + width], V, t, x0, restarts, free=free, max_substep=max_substep, compile=compile)
+                                   for i in range(0, m, width)])
+        padded = np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))])
+        return replay(padded, V, t, x0, restarts, free=free, max_substep=max_substep, compile=compile)[:m]
     period = float(t[1] - t[0]) if n > 1 else 1e-3
-    n_sub = substeps(period, MAX_SUBSTEP)
+    n_sub = substeps(period, max_substep)
     names = PlantParameters.names()
     free_idx = tuple(range(len(names))) if free is None else tuple(names.index(n) for n in free)
     fixed = tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vectors[0]))

@@ -262,8 +262,9 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
     return np.column_stack(columns)
 
 
-#: Share of the fit's time budget the polish may use, and the pattern-search steps of each refit on a part.
-POLISH_SHARE = 0.7
+#: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s
+#: of log. Then the pattern-search steps of each refit on a part.
+POLISH_WORK = 1.4e7
 PART_STEPS = 4
 #: The smoothed fit sees at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
 STAGE_SECONDS = 20.0
@@ -359,7 +360,7 @@ def fit_parameters(
     compile: bool | None = None,
     polish_iter: int = 12,
     uncertainty_parts: bool = True,
-    time_budget: float = 18.0,
+    polish_work: float = POLISH_WORK,
     on_progress: Callable[[str], None] | None = None,
     verbose: bool = False,
 ) -> FitResult:
@@ -393,9 +394,9 @@ def fit_parameters(
         Largest number of pattern-search steps of the polish on the true law's replay.
     uncertainty_parts : bool
         Uncertainties from refits on parts of the logs (else from the smoothed problem's covariance).
-    time_budget : float
-        Seconds after which the polish stops and the refits on parts are skipped (their answer so far
-        is kept and checked as any other).
+    polish_work : float
+        Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
+        same answer on a busy machine.
 
     Returns
     -------
@@ -543,25 +544,31 @@ def fit_parameters(
     lower, upper = lbx[: len(names)], ubx[: len(names)]
     prior = (theta0, regularization) if regularization > 0 else None
     theta_smooth = w_opt[: len(names)]
-    # The polish may take the budget up to POLISH_SHARE; the refits on parts take what they need after it.
-    deadline = t_start + POLISH_SHARE * time_budget
     space = _polish.Space(params0, names, scales, lower, upper, prior)
-    polished = _polish.polish(replays, space, theta_smooth, max_iter=polish_iter, deadline=deadline)
+    # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
+    # estimate there; the check below replays everything.
+    searched = replays
+    if any(piece is not whole[j][0] for piece, j, _ in pieces):
+        searched = [
+            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j][3][:, first // whole[j][2]], np.zeros(4 - ns)])
+            for piece, j, first in pieces
+        ]
+    polished = _polish.polish(searched, space, theta_smooth, max_iter=polish_iter, work=polish_work)
+    if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
+        polished = _polish.polish(replays, space, polished.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
     theta_opt = polished.theta
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)
     progress(f"polished on the replay under the true stick-slip law: {polished.iterations} iterations, {polished.replays} batched replays, cost {polished.start_cost:.4g} -> {polished.cost:.4g}")
 
-    # Uncertainty: refits on parts of the logs; the shooting problem's covariance where the logs cannot be cut.
-    # The refits on parts (a few pattern-search steps each, no scans) cost about one replay of the logs per
-    # parameter and step; they are skipped when the budget is spent.
-    parts_cost = PART_STEPS * (2 * len(names) + 13) * polished.seconds_per_set
-    parts_fit = uncertainty_parts and time.perf_counter() + parts_cost < t_start + time_budget
-    spread = _polish.part_spread(replays, space, theta_opt, max_iter=PART_STEPS) if parts_fit else None
+    # Uncertainty: refits on parts of the logs (a few pattern-search steps each, no scans), at least the
+    # width of the cost's profile; the smoothed problem's covariance where the logs cannot be cut.
+    parts_fit = uncertainty_parts
+    spread = _polish.part_spread(searched, space, theta_opt, max_iter=PART_STEPS) if parts_fit else None
     if spread is not None:
         # A flat stretch of the replay's cost (a threshold no push of the logs probes) hides from the
         # parts' spread; the profile of the cost around the answer shows it.
-        width = _polish.profile_width(replays, space, theta_opt)
+        width = _polish.profile_width(searched, space, theta_opt)
         uncertainty = np.maximum(spread[0], width)
         uncertainty_method = f"spread of refits on {spread[1].shape[0]} parts of the logs, at least the width of the replay's cost profile"
     else:
