@@ -5,15 +5,17 @@ the smoothing that makes it solvable also biases it. Here the answer is polished
 finally judged by, a replay of every log through the plant with the law's switches as they are
 (:mod:`pendulab.calibration._replay`):
 
-* **anchors** (:class:`Anchors`): the replay restarts wherever the log says what the state is: at the
-  start of each rest of the cart (the logged position, at rest); for an upright pendulum, which is
-  open-loop unstable, also every :data:`UNSTABLE_WINDOW` seconds from the fit's state estimate;
-* **polish** (:func:`polish`): a pattern search on the replay's position (and angle) errors, each
-  step trying every parameter up and down in one batched replay;
-* **uncertainty** (:func:`part_spread`): the log is cut into parts at rests, the polish is repeated on
-  each part from the answer, and the spread of the parts' answers gives the standard uncertainty
-  (a jackknife over the parts). It measures what a different stretch of log would have said, which
-  the residual's noise level, strongly correlated along a replay, does not.
+* **anchors** (:class:`Anchors`): the replay restarts wherever the log says what the state is: late
+  in each rest of the cart (position and speed from a line through the positions there: a stuck cart
+  still creeps in the lab's law); for an upright pendulum, which is open-loop unstable, also every
+  :data:`UNSTABLE_WINDOW` seconds from the fit's state estimate;
+* **polish** (:func:`polish`): scans of the thresholds, then a pattern search on the replay's
+  position (and angle) errors, each step trying all its moves in one batched replay;
+* **uncertainty** (:func:`part_spread`, :func:`profile_width`): the logs are cut into parts at
+  restarts, the polish is repeated on each part from the answer, and the spread of the parts' answers
+  gives the standard uncertainty (a jackknife over the parts), at least the width of the cost's
+  profile around the answer. It measures what a different stretch of log would have said, which the
+  residual's noise level, strongly correlated along a replay, does not.
 """
 
 from __future__ import annotations

@@ -9,11 +9,16 @@ Method
 force is replaced by a smoothed stick-slip law (:func:`fit_model`; the switch widths scale with
 the thresholds so that a cart below ``F1`` really stays stuck).
 
-*Multiple shooting.* The log is cut into shooting intervals of ``interval`` seconds (10 ms). The
-state at the start of every interval is an unknown, initialized from the smoothed log; one interval
-integrates its logged samples with RK4 (sub-steps of at most ``max_substep``) inside one CasADi
-function, applied to all intervals at once with ``map``. Those functions and their Jacobians are
-compiled to C once per machine (see :mod:`pendulab.calibration._shooting`).
+Three stages: a smoothed fit finds the basin, a polish on the true law's replay finds the answer,
+and a check replays the whole logs with it.
+
+*Stage 1, multiple shooting on the smoothed law.* At most :data:`STAGE_SECONDS` of the logs (for
+longer logs, the :data:`PIECE_SECONDS` windows where the cart stops and starts most) are cut into
+shooting intervals of ``interval`` seconds (10 ms). The state at the start of every interval is an
+unknown, initialized from the smoothed log; one interval integrates its logged samples with RK4
+(sub-steps of at most ``max_substep``) inside one CasADi function, applied to all intervals at once
+with ``map``. Those functions and their Jacobians are compiled to C once per machine (see
+:mod:`pendulab.calibration._shooting`).
 
 *Continuity as process noise.* The defect between the end of one interval and the start of the
 next is a residual weighted by ``process_noise`` (per interval: 5 um, 0.5 mm/s) rather than a hard
@@ -24,26 +29,33 @@ local model errors, while the parameters still have to explain the motion of eve
 
 *Solver.* IPOPT (through ``nlpsol``) on ``1/2 |r|^2`` with the gradient ``J^T r`` and the
 Gauss-Newton Hessian ``J^T J`` supplied (``grad_f``, ``hess_lag``); the constraints ``F1 <= F2`` and
-``v1 <= v2`` and positivity bounds keep the friction model well ordered.
-
-*Scaling.* Each fitted parameter is a decision variable divided by its starting value (or a typical
-size where that is 0), so all are of order 1.
+``v1 <= v2`` and positivity bounds keep the friction model well ordered. Each fitted parameter is a
+decision variable divided by its starting value (or a typical size where that is 0). If the answer
+does not replay the logs (a local minimum), it is solved again from the lab's defaults and the better
+replay wins.
 
 *A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
 standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
-parameters that the logs cannot show at their starting values (their uncertainty is then about
-100 %) and moves well-determined ones by far less than their uncertainty.
+parameters that the logs cannot show at their starting values and moves well-determined ones by far
+less than their uncertainty.
 
-*Forward check.* The answer is always replayed through the plant under the true (switching)
-stick-slip law over the whole log (:func:`_forward_simulation`; logs with an upright pendulum, which
-is open-loop unstable, restart every second from the fit's state estimate), and the RMS and largest
-position error are reported and stored in the calibration file. ``pendulab fit`` refuses (exit status
-3) an answer whose replay misses by more than :attr:`FitResult.forward_limit`.
+*Stage 2, the polish* (:mod:`pendulab.calibration._polish`). The smoothing that makes stage 1
+solvable biases it, and a threshold a per cent off decides whether a push breaks the cart away at
+all. The answer is polished on the replay of the logs through the plant under the true (switching)
+law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel): scans of ``F1``,
+``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed.
 
-*Uncertainty.* ``cov = (J^T J)^-1 * sigma^2`` with ``J`` the Jacobian of all residuals with respect
-to all unknowns (parameters and shooting nodes) at the solution and ``sigma^2 = r^T r / (N - n)``;
-the parameters' block is their covariance with the nodes eliminated, and the reported standard
-uncertainty is the square root of its diagonal.
+*Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
+(each rest of the cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state
+estimate); the RMS and largest position error are reported and stored in the calibration file.
+``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than
+:attr:`FitResult.forward_limit`.
+
+*Uncertainty.* The spread of refits on four parts of the logs (each polished from the answer; the
+whole logs' answer varies ``sqrt(4)`` times less), at least the width of the replay cost's profile
+around the answer (a threshold no push probes leaves the cost flat, and the parts then agree). Where
+the logs cannot be cut into parts, the smoothed problem's covariance ``(J^T J)^-1 sigma^2`` with the
+shooting nodes eliminated.
 
 Examples
 --------
