@@ -140,7 +140,6 @@ class Polished:
     theta: np.ndarray
     cost: float
     start_cost: float
-    work: float  # samples replayed (parameter sets x samples)
     iterations: int
     replays: int
 
@@ -282,7 +281,7 @@ def polish(
             radius /= 3.0
             if radius < min_step:
                 break
-    return Polished(theta=theta, cost=cost, start_cost=start_cost, work=done["samples"], iterations=it, replays=replays)
+    return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=replays)
 
 
 def log_parts(logs: list[Anchors], n_parts: int) -> list[list[Anchors]]:

@@ -77,7 +77,7 @@ import time
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, NamedTuple, Sequence
 
 import casadi as ca
 import numpy as np
@@ -94,6 +94,19 @@ FITTABLE = (*FRICTION_NAMES, *FITTED_NAMES)
 _TYPICAL = {"F1": 1.0, "v1": 0.005, "F2": 1.0, "v2": 0.05, "B": 10.0, "Beq": 1.0, "force_gain": 1.0, "M_cart": 0.5}
 _LOWER = {"F1": 0.0, "v1": 1e-4, "F2": 0.0, "v2": 1e-3, "B": 0.0, "Beq": 0.0, "force_gain": 0.05, "M_cart": 0.05}
 _UPPER = {"F1": 50.0, "v1": 1.0, "F2": 50.0, "v2": 2.0, "B": 2000.0, "Beq": 200.0, "force_gain": 10.0, "M_cart": 20.0}
+
+
+class _LogEstimate(NamedTuple):
+    """One whole log after the smoothed fit: its state estimates every ``stride`` samples (the fit's
+    nodes where it saw the log, the smoothed log elsewhere), its trajectory (NaN where it did not see
+    the log) and its measurement noise."""
+
+    log: RampLog
+    used: int
+    stride: int
+    estimates: np.ndarray  # (n_states, used // stride + 1)
+    fitted: np.ndarray
+    sigma: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -242,13 +255,16 @@ def fit_model() -> tuple[ca.Function, ca.Function]:
     return ode, rk4
 
 
-def _noise_level(x: np.ndarray) -> float:
-    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
-    d2 = np.diff(x, 2)
+def _encoder_step(x: np.ndarray) -> float:
+    """The encoder step of logged positions (or angles): the smallest change between samples (0 if none)."""
     dx = np.abs(np.diff(x))
     steps = dx[dx > 1e-12]
-    q = float(np.min(steps)) if steps.size else 0.0
-    return max(float(np.std(d2)) / math.sqrt(6), q / math.sqrt(12), 1e-6)
+    return float(np.min(steps)) if steps.size else 0.0
+
+
+def _noise_level(x: np.ndarray) -> float:
+    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
+    return max(float(np.std(np.diff(x, 2))) / math.sqrt(6), _encoder_step(x) / math.sqrt(12), 1e-6)
 
 
 def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
@@ -283,13 +299,6 @@ STAGE_SECONDS = 20.0
 PIECE_SECONDS = 4.0
 
 
-def log_step(log: RampLog) -> float:
-    """The encoder step of a log's positions: the smallest change between samples."""
-    dx = np.abs(np.diff(log.x))
-    steps = dx[dx > 1e-12]
-    return float(np.min(steps)) if steps.size else 0.0
-
-
 def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int]) -> list[tuple[RampLog, int, int]]:
     """``(piece, index of its log, first sample)`` for the smoothed fit: whole logs if they are short.
 
@@ -308,7 +317,7 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
         length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
         # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
-        edges = np.array(sorted(k for span in rests(log.x, log_step(log), _noise_level(log.x), log.period) for k in span))
+        edges = np.array(sorted(k for span in rests(log.x, _encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
         stride = max(M, (length // 8) // M * M)
         for first in range(0, len(log) - length + 1, stride):
             changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
@@ -516,9 +525,7 @@ def fit_parameters(
         outputs = [np.asarray(y) for y in at_solution[2:]]
         errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
         _, nodes = problem.split(w_opt)
-        # Per log: the state estimates every M samples (the smoothed fit's nodes where it saw the log, the
-        # smoothed log elsewhere) and its trajectory (NaN where it did not see the log).
-        whole = []
+        whole: list[_LogEstimate] = []
         for j, log in enumerate(logs):
             M = samples_per_interval(log)
             used = ((len(log) - 1) // M) * M + 1
@@ -530,8 +537,8 @@ def fit_parameters(
                     estimates[:, k : k + S.shape[1]] = S[:, : estimates.shape[1] - k]
                     fitted[first : first + b.used] = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()][: used - first]
             sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-            whole.append((log, used, M, estimates, fitted, sigma))
-        replays = [_polish.anchors(log, used, S, M, sigma, step, with_pendulum) for log, used, M, S, _, sigma in whole]
+            whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
+        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, with_pendulum) for e in whole]
         vector = np.asarray(params0.with_values(**{n: float(v * s) for n, v, s in zip(names, w_opt[: len(names)], scales)}).as_vector())
         replay_cost = float(np.sum(_polish.replay_errors(replays, vector[None, :], names) ** 2))
         return {
@@ -560,9 +567,9 @@ def fit_parameters(
     # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
     # estimate there; the check below replays everything.
     searched = replays
-    if any(piece is not whole[j][0] for piece, j, _ in pieces):
+    if any(piece is not whole[j].log for piece, j, _ in pieces):
         searched = [
-            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j][3][:, first // whole[j][2]], np.zeros(4 - ns)])
+            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
             for piece, j, first in pieces
         ]
     polished = _polish.polish(searched, space, theta_smooth, max_iter=polish_iter, work=polish_work)
@@ -575,8 +582,7 @@ def fit_parameters(
 
     # Uncertainty: refits on parts of the logs (a few pattern-search steps each, no scans), at least the
     # width of the cost's profile; the smoothed problem's covariance where the logs cannot be cut.
-    parts_fit = uncertainty_parts
-    spread = _polish.part_spread(searched, space, theta_opt, max_iter=PART_STEPS) if parts_fit else None
+    spread = _polish.part_spread(searched, space, theta_opt, max_iter=PART_STEPS) if uncertainty_parts else None
     if spread is not None:
         # A flat stretch of the replay's cost (a threshold no push of the logs probes) hides from the
         # parts' spread; the profile of the cost around the answer shows it.
@@ -589,9 +595,10 @@ def fit_parameters(
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
     curves, forward_errors = [], []
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
-    for (log, used, _, _, fitted, _), a in zip(whole, replays):
+    for e, a in zip(whole, replays):
         simulated = np.r_[a.x0[0], _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0, :, 0]]
-        curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], fitted, simulated))
+        log, used = e.log, e.used
+        curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
         forward_errors.append(simulated - log.x[:used])
     forward = np.concatenate(forward_errors)
     forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
@@ -617,7 +624,7 @@ def fit_parameters(
         forward_rms=forward_rms,
         forward_max=forward_max,
         encoder_step=float(params0.q_x),
-        travel=max(float(np.ptp(log.x[:used])) for log, used, *_ in whole),
+        travel=max(float(np.ptp(e.log.x[: e.used])) for e in whole),
     )
 
 
