@@ -92,3 +92,16 @@ def read_log(path: Path):
     import numpy as np
 
     return np.genfromtxt(path, delimiter=",", names=True)
+
+
+def angle_error_against_simulate(run: Path, poke: str, out: Path) -> tuple[int, float]:
+    """``pendulab simulate --demo`` at the rig run's measured delay N and poke, 4 s, into ``out``; the
+    angle's NRMSE between the two over 1 s after the poke. Returns ``(N, nrmse)``."""
+    import json
+
+    from pendulab.cli.main import main
+    from pendulab.hil.compare import load_compared, nrmse
+
+    n = json.loads((run / "timing.json").read_text())["delay_periods"]
+    assert main(["simulate", "--demo", "--delay", str(n), "--poke", poke, "--stop-time", "4", "--out", str(out)]) == 0
+    return n, nrmse(load_compared(run), load_compared(out), "alpha", window=1.0)

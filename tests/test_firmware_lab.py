@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from firmware_helpers import twin_available
-from hil_helpers import emulator, lab, lab_process, read_log
+from hil_helpers import angle_error_against_simulate, emulator, lab_process, read_log
 
 pytestmark = [
     pytest.mark.skipif(sys.platform == "win32", reason="simavr and pseudo-terminals are POSIX"),
@@ -100,14 +100,7 @@ def test_demo_controller_balances_through_lab_twin_and_firmware(twin_run):
 
 
 def test_twin_run_matches_simulate_with_the_same_delay(twin_run, tmp_path):
-    from pendulab.cli.main import main
-    from pendulab.hil.compare import load_compared, nrmse
-
-    out = twin_run[0]
-    n = json.loads((out / "timing.json").read_text())["delay_periods"]
-    sim = tmp_path / "sim"
-    assert main(["simulate", "--demo", "--delay", str(n), "--poke", POKE, "--stop-time", "4", "--out", str(sim)]) == 0
-    error = nrmse(load_compared(out), load_compared(sim), "alpha", window=1.0)
+    n, error = angle_error_against_simulate(twin_run[0], POKE, tmp_path / "sim")
     print(f"angle NRMSE firmware twin vs simulate --delay {n}: {100 * error:.2f} %")
     assert error < 0.10
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from hil_helpers import emulator, lab, lab_process, read_log
+from hil_helpers import angle_error_against_simulate, emulator, lab, lab_process, read_log
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")
 
@@ -86,16 +86,13 @@ def test_demo_session_balances_and_writes_a_complete_run(demo_run):
 def test_rig_run_matches_simulate_with_the_same_delay(tmp_path):
     """Must-show 4: the same controller and poke in simulate --delay N: angle NRMSE < 5 % over 1 s."""
     from pendulab.cli.main import main
-    from pendulab.hil.compare import load_compared, nrmse
 
     out = tmp_path / "rig"
     with emulator("--raise-after", "0.3", "--poke", BIG_POKE) as emu:
         result = lab("--port", emu.port, "--demo", "--max-delay", "8", "--stop-time", "4", "--out", str(out), stdin="s\n")
     assert result.returncode == 0, result.stdout + result.stderr
-    n = json.loads((out / "timing.json").read_text())["delay_periods"]
     sim = tmp_path / "sim"
-    assert main(["simulate", "--demo", "--delay", str(n), "--poke", BIG_POKE, "--stop-time", "4", "--out", str(sim)]) == 0
-    error = nrmse(load_compared(out), load_compared(sim), "alpha", window=1.0)
+    n, error = angle_error_against_simulate(out, BIG_POKE, sim)
     print(f"angle NRMSE rig emulator vs simulate --delay {n}: {100 * error:.2f} %")
     assert error < 0.05
     # The comparison command on the pair: the table and the PNG.
