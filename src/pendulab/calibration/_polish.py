@@ -104,7 +104,14 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
     upright = with_pendulum and log.alpha is not None and float(np.median(np.abs(log.alpha))) < math.pi / 2
     if not with_pendulum:
         w = max(3, int(round(REST_WINDOW / log.period)))
-        for first, stop in rests(log.x[:used], step, float(sigma[0]), log.period):
+        spans = rests(log.x[:used], step, float(sigma[0]), log.period)
+        if spans and spans[0][0] == 0:
+            # A log that starts at rest starts from the rest's line, not from a smoothed speed: a stuck
+            # cart keeps a speed below v1 (decaying over Mc/Beq), and 1 mm/s too much is a lasting 0.1 mm.
+            hi = min(spans[0][1], 3 * w)
+            slope, value = np.polyfit(log.t[:hi] - log.t[0], log.x[:hi], 1)
+            x0[:2] = [float(value), float(slope)]
+        for first, stop in spans:
             # Late in the rest, where the creep has died down; position and speed from a line through
             # the positions around that sample (the encoder's steps average out over it).
             k = max(first, stop - w)

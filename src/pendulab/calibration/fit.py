@@ -332,6 +332,16 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
     return [(logs[j].slice(first, first + length), j, first) for j, first, length in sorted(chosen)]
 
 
+def _start_from_logs(logs: Sequence[RampLog], params0: PlantParameters, names: Sequence[str], progress: Callable[[str], None]) -> PlantParameters:
+    """``params0`` with the fitted names' values estimated from the logs (:func:`~pendulab.calibration._start.log_start`)."""
+    from pendulab.calibration import _start
+
+    estimate = params0.with_values(**{n: getattr(_start.log_start(logs, params0), n) for n in names})
+    shown = ", ".join(f"{n}={getattr(estimate, n):.4g}" for n in names if getattr(estimate, n) != getattr(params0, n))
+    progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
+    return estimate
+
+
 def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: Callable[[RampLog], int]) -> None:
     if not logs:
         raise CalibrationError("no log to fit; give at least one log file")
@@ -382,6 +392,7 @@ def fit_parameters(
     polish_iter: int = 12,
     uncertainty_parts: bool = True,
     polish_work: float = POLISH_WORK,
+    start_from_logs: bool = True,
     on_progress: Callable[[str], None] | None = None,
     verbose: bool = False,
 ) -> FitResult:
@@ -418,6 +429,11 @@ def fit_parameters(
     polish_work : float
         Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
         same answer on a busy machine.
+    start_from_logs : bool
+        Also consider a start estimated from the logs themselves (:mod:`pendulab.calibration._start`:
+        the drive and the drag from fast motion, the breakaway force from the rests) and start from
+        whichever of it and ``params0`` replays the logs better. Logs with the pendulum start from
+        ``params0``.
 
     Returns
     -------
@@ -441,14 +457,14 @@ def fit_parameters(
     all_names = PlantParameters.names()
     fitted_idx = tuple(all_names.index(n) for n in names)
     p0 = np.asarray(params0.as_vector(), dtype=float)
-    start = np.array([getattr(params0, n) for n in names])
-    scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start)])
-    theta0 = start / scales
 
     def samples_per_interval(log: RampLog) -> int:
         return max(1, int(round(interval / log.period)))
 
     _check_logs(logs, with_pendulum, samples_per_interval)
+    start = np.array([getattr(params0, n) for n in names])
+    scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start)])
+    theta0 = start / scales
     defect_sigma = np.asarray(process_noise, dtype=float)[:ns]
 
     t_prepare = time.perf_counter()
@@ -539,42 +555,56 @@ def fit_parameters(
             sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
             whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
         replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, with_pendulum) for e in whole]
-        vector = np.asarray(params0.with_values(**{n: float(v * s) for n, v, s in zip(names, w_opt[: len(names)], scales)}).as_vector())
-        replay_cost = float(np.sum(_polish.replay_errors(replays, vector[None, :], names) ** 2))
         return {
             "w": w_opt, "stats": stats, "r": np.asarray(at_solution[0]).ravel(), "J": at_solution[1],
-            "rms": float(np.sqrt(np.mean(errors**2))), "whole": whole, "replays": replays, "replay_cost": replay_cost,
-            "replay_rms": math.sqrt(replay_cost / sum(a.measured.size for a in replays)) * float(np.mean([a.sigma[0] for a in replays])),
+            "rms": float(np.sqrt(np.mean(errors**2))), "whole": whole, "replays": replays,
         }
-
-    # A second start where the first one's answer does not replay the logs (a local minimum of the
-    # smoothed problem): the lab's defaults, and the better replay wins.
-    best = smoothed_fit(theta0)
-    defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
-    theta_default = np.array([getattr(defaults, n) for n in names]) / scales
-    if best["replay_rms"] > FORWARD_LIMIT_STEPS * max(step, 1e-6) and np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
-        progress("the answer does not replay the logs; solving again from the lab's defaults")
-        other = smoothed_fit(theta_default)
-        if other["replay_cost"] < best["replay_cost"]:
-            best = other
-    w_opt, stats, r_opt, J_opt, rms = best["w"], best["stats"], best["r"], best["J"], best["rms"]
-    whole, replays = best["whole"], best["replays"]
 
     lower, upper = lbx[: len(names)], ubx[: len(names)]
     prior = (theta0, regularization) if regularization > 0 else None
-    theta_smooth = w_opt[: len(names)]
     space = _polish.Space(params0, names, scales, lower, upper, prior)
-    # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
-    # estimate there; the check below replays everything.
-    searched = replays
-    if any(piece is not whole[j].log for piece, j, _ in pieces):
-        searched = [
-            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
-            for piece, j, first in pieces
-        ]
-    polished = _polish.polish(searched, space, theta_smooth, max_iter=polish_iter, work=polish_work)
-    if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
-        polished = _polish.polish(replays, space, polished.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
+
+    def polished_fit(candidate: dict[str, Any]) -> dict[str, Any]:
+        """The smoothed answer polished on the replay; its replay RMS over the whole logs."""
+        whole, replays = candidate["whole"], candidate["replays"]
+        # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
+        # estimate there; the check replays everything.
+        searched = replays
+        if any(piece is not whole[j].log for piece, j, _ in pieces):
+            searched = [
+                replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
+                for piece, j, first in pieces
+            ]
+        result = _polish.polish(searched, space, candidate["w"][: len(names)], max_iter=polish_iter, work=polish_work)
+        if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
+            result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
+        errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
+        scale = float(np.mean([a.sigma[0] for a in replays]))
+        return {**candidate, "polished": result, "searched": searched, "polished_rms": float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * scale}
+
+    # More starts where the first one's polished answer does not replay the logs (a local minimum of the
+    # smoothed problem): the logs' own estimate (cart alone), the lab's defaults; the better replay wins.
+    limit = FORWARD_LIMIT_STEPS * max(step, 1e-6)
+    best = polished_fit(smoothed_fit(theta0))
+    others: list[tuple[str, np.ndarray]] = []
+    if start_from_logs and not with_pendulum and best["polished_rms"] > limit:
+        estimate = _start_from_logs(logs, params0, names, progress)
+        others.append(("the logs' own estimate", np.array([getattr(estimate, n) for n in names]) / scales))
+    defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
+    others.append(("the lab's defaults", np.array([getattr(defaults, n) for n in names]) / scales))
+    tried = [theta0]
+    for label, theta_other in others:
+        if best["polished_rms"] <= limit:
+            break
+        if min(np.max(np.abs(theta_other / t - 1)) for t in tried) <= 0.05:
+            continue
+        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again from {label}")
+        tried.append(theta_other)
+        other = polished_fit(smoothed_fit(theta_other))
+        if other["polished_rms"] < best["polished_rms"]:
+            best = other
+    w_opt, stats, r_opt, J_opt, rms = best["w"], best["stats"], best["r"], best["J"], best["rms"]
+    whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
     theta_opt = polished.theta
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)

@@ -1,0 +1,166 @@
+"""Starting values for the fit from the logs themselves, whatever their shape.
+
+The fit's smoothed problem has local minima, and a start from the lab's defaults lands in a wrong one
+when the rig is far from them (three times the breakaway force, five times the slip drag). Two
+things any log of a moving cart shows, without recognising a ramp test:
+
+* **the drive and the drag** (:func:`drive_and_drag`): where the cart slides fast it is past the
+  stick-slip law (``F_friction = 0``), so ``Mc*a = force_gain*(K*V - b*v) - Beq*v`` holds with the
+  speed ``v`` and acceleration ``a`` of the smoothed log. That is linear in ``force_gain`` and
+  ``Beq``: a least-squares fit on the fastest samples, trimmed of those that do not fit (the slip
+  region's drag, the edges of a step);
+* **the breakaway force** (:func:`breakaway_voltage`): at every rest of the cart, the largest voltage
+  it held without moving is a lower bound of ``F1``, and the voltage where it broke away while the
+  voltage rose slowly is an upper bound.
+
+Examples
+--------
+>>> import numpy as np
+>>> from pendulab.calibration.logs import RampLog
+>>> from pendulab.calibration._simulation import simulate
+>>> p = PlantParameters.preset("none", Beq=9.0, force_gain=0.7)
+>>> t = np.arange(4000) * 1e-3
+>>> V = 6.0 * np.sin(2 * np.pi * 0.5 * t)
+>>> x = simulate(p, V, 1e-3, np.zeros(4))[:, 0]
+>>> start = log_start([RampLog(np.r_[t, 4.0], np.r_[V, 0.0], x)], PlantParameters.preset("none"))
+>>> round(start.force_gain, 1), round(start.Beq)
+(0.7, 9)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from pendulab.calibration.logs import RampLog
+from pendulab.model.parameters import PlantParameters
+
+#: Smoothing window for speed and acceleration (s).
+SMOOTHING = 0.03
+#: The fraction of moving samples (the fastest) that seeds the fit of the drive and the drag.
+SEED_FRACTION = 0.2
+
+
+def _motion(log: RampLog, V: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Speed, acceleration and voltage of the log, all through the same smoothing filter.
+
+    (Savitzky-Golay, cubic.) The filter is linear, so the smoothed signals obey the same linear
+    equation as the raw ones: smoothing the acceleration but not the voltage would not (at a step).
+    """
+    from scipy.signal import savgol_filter
+
+    n = len(log)
+    window = max(5, int(round(SMOOTHING / log.period)) | 1)
+    if n <= window:
+        v = np.gradient(log.x, log.t)
+        return v, np.gradient(v, log.t), V
+    v = savgol_filter(log.x, window, 3, deriv=1, delta=log.period)
+    a = savgol_filter(log.x, window, 3, deriv=2, delta=log.period)
+    return v, a, savgol_filter(V, window, 3)
+
+
+def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float, float] | None:
+    """``(force_gain, Beq)`` from the fastest samples of the logs (None if too few move).
+
+    A cart that slides fast feels no stick-slip friction, so ``Mc*a = g*(K*V - b*v) - Beq*v`` there
+    (``K``, ``b``: the motor's force per volt and back-EMF damping at ``force_gain = 1``).
+    """
+    from pendulab.calibration.extract import motor_constants
+
+    K, b = motor_constants(params.with_values(force_gain=1.0))
+    Mc = params.lumped_cart_mass
+    rows, rhs, volts = [], [], []
+    for log in logs:
+        v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
+        # Not where the amplifier saturates, and not the first or last samples of the smoothing.
+        edge = max(5, int(round(SMOOTHING / log.period)))
+        keep = (np.abs(log.V) < 0.98 * params.V_max) & (np.arange(len(log)) >= edge) & (np.arange(len(log)) < len(log) - edge)
+        rows.append(np.column_stack([K * V - b * v, -v])[keep])
+        volts.append(V[keep])
+        rhs.append(Mc * a[keep])
+    A, y = np.concatenate(rows), np.concatenate(rhs)
+    # Moving: faster than the encoder's quantization can fake through the smoothing window.
+    speed = np.abs(A[:, 1])
+    moving = speed > max(1e-3, 5.0 * float(params.q_x) / SMOOTHING)
+    if np.count_nonzero(moving) < 50:
+        return None
+    A, y, speed = A[moving], y[moving], speed[moving]
+    # Seeded by the fastest samples (past any slip region), grown to every sample the seed's answer
+    # explains: the accelerations that tell the drive from the drag, but not the slip region's drag.
+    # A weak ridge towards params0 holds the scale where only cruising (a = 0, just the ratio) is seen.
+    prior = np.array([params.force_gain, params.Beq])
+    scale = np.sqrt(np.mean(A**2, axis=0)) + 1e-12
+    use = speed >= np.quantile(speed, 1.0 - SEED_FRACTION)
+    solution = prior
+    for _ in range(6):
+        ridge = 1e-3 * np.count_nonzero(use)
+        M = np.vstack([A[use] / scale, math.sqrt(ridge) * np.eye(2)])
+        z, *_ = np.linalg.lstsq(M, np.r_[y[use], math.sqrt(ridge) * prior * scale], rcond=None)
+        solution = z / scale
+        residual = np.abs(A @ solution - y)
+        spread = 1.4826 * float(np.median(residual[use])) + 1e-9
+        grown = residual <= 3.0 * spread
+        if np.array_equal(grown, use) or np.count_nonzero(grown) < 20:
+            break
+        use = grown
+    gain, Beq = (float(s) for s in solution)
+    if not (math.isfinite(gain) and math.isfinite(Beq)) or gain <= 0:
+        return None
+    return gain, max(Beq, 0.0)
+
+
+def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
+    """The voltage of the breakaway force ``F1`` (V at rest), from the rests of the cart (None if none).
+
+    The largest voltage held through a rest is a lower bound; where the voltage rose slowly into a
+    breakaway, the voltage there is an upper bound. The estimate lies between them.
+    """
+    from pendulab.calibration._polish import REST_WINDOW, rests
+
+    held, broke = [], []
+    for log in logs:
+        w = max(3, int(round(REST_WINDOW / log.period)))
+        noise = max(step / math.sqrt(12), 1e-6)
+        for first, stop in rests(log.x, step, noise, log.period):
+            inside = np.abs(log.V[first + w : max(first + w, stop - 2 * w)])
+            if inside.size:
+                held.append(float(np.max(inside)))
+            if stop < len(log) - 1:
+                around = np.abs(log.V[max(first, stop - 2 * w) : stop + 1])
+                # A slow rise (not a jump): the voltage at the breakaway measures the threshold.
+                if around.size > 2 and np.ptp(around) <= 0.1 * max(float(np.max(around)), 1e-6):
+                    broke.append(float(np.max(around)))
+    lower = max(held) if held else None
+    upper = min((u for u in broke if lower is None or u >= lower), default=None)
+    if lower is not None and upper is not None:
+        return 0.5 * (lower + upper)
+    if upper is not None:
+        return upper
+    if lower is not None and lower > 0.05:
+        return 1.1 * lower
+    return None
+
+
+def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParameters:
+    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs.
+
+    What the logs cannot show keeps ``params0``'s value; logs with the pendulum keep ``params0``.
+    """
+    if params0.Mp > 0:
+        return params0
+    values: dict[str, float] = {}
+    drive = drive_and_drag(logs, params0)
+    gain = params0.force_gain
+    if drive is not None:
+        gain, Beq = drive
+        values.update(force_gain=gain, Beq=Beq)
+    V1 = breakaway_voltage(logs, float(params0.q_x))
+    if V1 is not None:
+        from pendulab.calibration.extract import motor_constants
+
+        K, _ = motor_constants(params0.with_values(force_gain=1.0))
+        F1 = gain * K * V1
+        values.update(F1=F1, F2=max(params0.F2, F1 * params0.F2 / max(params0.F1, 1e-9)))
+    return params0.with_values(**values)
