@@ -290,6 +290,9 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
     return np.column_stack(columns)
 
 
+#: Above this replay RMS (encoder steps) the polish also grids the pairs that make slanted valleys.
+REFINE_ABOVE_STEPS = 2.0
+REFINE_ROUNDS = 2
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s
 #: of log. Then the pattern-search steps of each refit on a part.
 POLISH_WORK = 1.4e7
@@ -474,6 +477,14 @@ def fit_parameters(
     # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
     # them; the polish and the check see everything.
     pieces = _pieces(logs, samples_per_interval)
+    # The replay's compiled functions build in a thread beside the shooting functions (a first fit on a
+    # machine compiles both; the compilers then run side by side).
+    prebuild = None
+    if compile is not False:
+        import threading
+
+        prebuild = threading.Thread(target=_replay.prepare, args=(params0, [log.period for log in logs], names), daemon=True)
+        prebuild.start()
     for log in (piece for piece, _, _ in pieces):
         M = samples_per_interval(log)
         n_sub = max(1, int(math.ceil(log.period / max_substep - 1e-9)))
@@ -486,6 +497,8 @@ def fit_parameters(
         blocks.append(block)
         offset_w += block.n_w
         offset_r += block.n_r
+    if prebuild is not None:
+        prebuild.join()
     if any(f.built for f in functions.values()):
         progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
     problem = Problem(blocks, len(names), scales, theta0, regularization)
@@ -576,6 +589,16 @@ def fit_parameters(
                 for piece, j, first in pieces
             ]
         result = _polish.polish(searched, space, candidate["w"][: len(names)], max_iter=polish_iter, work=polish_work)
+        target = (REFINE_ABOVE_STEPS * step / searched[0].sigma[0]) ** 2 * sum(a.measured.size for a in searched)
+        for _ in range(REFINE_ROUNDS):
+            if result.cost <= target:
+                break
+            # Still more than a couple of encoder steps: step along the slanted valleys, then search again.
+            theta, cost = _polish.refine_pairs(searched, space, result.theta)
+            if cost >= result.cost:
+                break
+            again = _polish.polish(searched, space, theta, max_iter=polish_iter, scan=())
+            result = _polish.Polished(again.theta, again.cost, result.start_cost, result.iterations + again.iterations, result.replays + again.replays + 6)
         if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
             result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
         errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
@@ -684,7 +707,10 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
             continue
         vectors.append({n: v for n, v in zip(FRICTION_NAMES, estimate.measured) if estimate.counts.get(n, 0) > 0})
     if not vectors:
-        return params0, "starting from the given parameters (no ramp test found in the logs)"
+        return params0, (
+            "no ramp test to extract the friction from in the logs (fine: any motion will do); starting from the given "
+            "parameters, then, if their answer does not replay the logs, from an estimate made from the logs themselves"
+        )
     values = {n: float(np.mean([v[n] for v in vectors if n in v])) for n in FRICTION_NAMES if any(n in v for v in vectors)}
     merged = {**dict(zip(FRICTION_NAMES, params0.friction)), **values}
     merged["F2"] = max(merged["F2"], merged["F1"])
