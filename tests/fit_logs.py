@@ -15,6 +15,13 @@ from pendulab.model.parameters import PlantParameters
 #: Parameters the project's defaults have never seen.
 TRUE = PlantParameters.preset("none", Beq=6.1, force_gain=0.82, F1=2.3, v1=0.003, F2=3.9, v2=0.06, B=60.0)
 STEP = 1e-3
+#: Rigs far from the lab's defaults (Beq 4.3, force gain 1, F1 1.5 N, B 20), for the start and the benches.
+RIGS = {
+    "unseen": TRUE,
+    "heavy drag, weak drive": PlantParameters.preset("none", Beq=12.0, force_gain=0.6, F1=1.0, v1=0.004, F2=2.0, v2=0.08, B=40.0),
+    "light drag, strong drive": PlantParameters.preset("none", Beq=3.0, force_gain=1.2, F1=0.8, v1=0.006, F2=1.6, v2=0.04, B=15.0),
+    "sticky": PlantParameters.preset("none", Beq=8.0, force_gain=0.9, F1=3.0, v1=0.002, F2=5.0, v2=0.03, B=100.0),
+}
 
 
 def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:

@@ -63,6 +63,7 @@ class Anchors:
     x0: np.ndarray
     restarts: dict[int, np.ndarray]
     segments: np.ndarray
+    denoised: bool = False  # V is the logged voltage through denoised_voltage
 
     @property
     def n(self) -> int:
@@ -74,7 +75,7 @@ class Anchors:
             x0 = self.x0 if start == 0 else self.restarts[start]
         restarts = {k - start: s for k, s in self.restarts.items() if start < k < stop}
         segments = self.segments[(self.segments >= start) & (self.segments < stop)] - start
-        return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments)
+        return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments, self.denoised)
 
 
 def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple[int, int]]:
@@ -129,6 +130,38 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
         V=log.V[: used - 1], t=log.t[: used - 1], measured=np.column_stack(columns), sigma=sigma, x0=x0,
         restarts=restarts, segments=segments,
     )
+
+
+#: Logged voltage noise (V, robust estimate) above which a median-filtered voltage is also tried.
+VOLTAGE_NOISE = 1e-3
+#: The median filter's length (samples): it keeps steps and ramps, and takes the sample noise down about 2.3 times.
+VOLTAGE_MEDIAN = 9
+
+
+def voltage_noise(V: np.ndarray) -> float:
+    """Robust estimate of the sample noise on a logged voltage (V): the spread of its second differences.
+
+    Steps, ramps and slow sines have (nearly) no second difference except at a few edges, which the
+    median absolute deviation ignores; white noise of ``sigma`` has second differences of ``sqrt(6) sigma``.
+    """
+    if len(V) < 5:
+        return 0.0
+    d2 = np.diff(np.asarray(V, dtype=float), 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6))
+
+
+def denoised_voltage(V: np.ndarray) -> np.ndarray:
+    """The logged voltage through a :data:`VOLTAGE_MEDIAN`-sample median filter (edges kept)."""
+    from scipy.ndimage import median_filter
+
+    return median_filter(np.asarray(V, dtype=float), size=VOLTAGE_MEDIAN, mode="nearest")
+
+
+def denoised(a: Anchors) -> Anchors:
+    """``a`` with its voltage through :func:`denoised_voltage` if it is noisy (else ``a`` itself)."""
+    if a.denoised or voltage_noise(a.V) <= VOLTAGE_NOISE:
+        return a
+    return Anchors(denoised_voltage(a.V), a.t, a.measured, a.sigma, a.x0, a.restarts, a.segments, True)
 
 
 def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...], max_substep: float = MAX_SUBSTEP) -> np.ndarray:

@@ -20,6 +20,9 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io
+import json
+import subprocess
+import sys
 from functools import lru_cache
 from typing import Sequence
 
@@ -79,17 +82,29 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
 
 
 def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str], max_substep: float = MAX_SUBSTEP) -> None:
-    """Build (or load) the compiled replays for every width in :data:`SET_COUNTS` ahead of use.
-
-    A first fit on a machine runs this in a thread while it compiles its shooting functions, so
-    that the compilers run side by side.
-    """
+    """Build (or load) the compiled replays for every width in :data:`SET_COUNTS` ahead of use."""
     names = PlantParameters.names()
     free_idx = tuple(names.index(n) for n in free)
     fixed = tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(params.as_vector()))
     for period in sorted(set(periods)):
         for m in SET_COUNTS:
             _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True)
+
+
+def prepare_in_background(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> subprocess.Popen | None:
+    """:func:`prepare` in a separate process (None if it cannot start); ``wait()`` on it before replaying.
+
+    A first fit on a machine compiles its shooting functions and these replays; in another process the
+    two compilers run side by side. (Not a thread: CasADi's expression graphs are not thread-safe.)
+    """
+    request = json.dumps({"params": params.as_dict(), "periods": list(map(float, periods)), "free": list(free)})
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-m", "pendulab.calibration._replay", request],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+    except OSError:
+        return None
 
 
 def replay(
@@ -171,3 +186,8 @@ def replay(
         out[:, sl, :] = states.transpose(1, 2, 0)
         state = states[:, :, -1]
     return out[:, :n, :]
+
+
+if __name__ == "__main__":  # prepare_in_background's worker
+    _request = json.loads(sys.argv[1])
+    prepare(PlantParameters.from_mapping(_request["params"]), _request["periods"], _request["free"])

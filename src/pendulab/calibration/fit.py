@@ -30,9 +30,11 @@ local model errors, while the parameters still have to explain the motion of eve
 *Solver.* IPOPT (through ``nlpsol``) on ``1/2 |r|^2`` with the gradient ``J^T r`` and the
 Gauss-Newton Hessian ``J^T J`` supplied (``grad_f``, ``hess_lag``); the constraints ``F1 <= F2`` and
 ``v1 <= v2`` and positivity bounds keep the friction model well ordered. Each fitted parameter is a
-decision variable divided by its starting value (or a typical size where that is 0). If the answer
-does not replay the logs (a local minimum), it is solved again from the lab's defaults and the better
-replay wins.
+decision variable divided by its starting value (or a typical size where that is 0). If the polished
+answer does not replay the logs (a local minimum), it is solved and polished again from the lab's
+defaults, then from a start estimated from the logs themselves (:mod:`pendulab.calibration._start`:
+force gain and ``Beq`` from the fast motion, ``F1`` from the rests, whatever the logs' shape); the
+better replay wins.
 
 *A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
 standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
@@ -43,7 +45,11 @@ less than their uncertainty.
 solvable biases it, and a threshold a per cent off decides whether a push breaks the cart away at
 all. The answer is polished on the replay of the logs through the plant under the true (switching)
 law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel): scans of ``F1``,
-``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed.
+``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; while the replay
+still misses by more than two encoder steps, grids over the pairs that make slanted valleys
+(``v2`` with ``F2``, ``v1`` and ``B``) and the pattern search again. A logged voltage with sample
+noise (a measured one) is replayed through a median filter where that replays the motion better:
+noise on a level just below a threshold would otherwise break the cart away in the replay.
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
 (each rest of the cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state
@@ -154,6 +160,7 @@ class FitResult:
     travel: float = 0.0  # largest peak-to-peak cart position of the logs (m)
     uncertainty_method: str = ""
     restarts: int = 0  # where the forward simulation continued from a known state (rests; an upright pendulum's estimates)
+    voltage_filtered: bool = False  # the replays used the logged voltage through a median filter (noisy voltage)
 
     @property
     def forward_limit(self) -> float:
@@ -172,6 +179,7 @@ class FitResult:
             "method": "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law",
             "uncertainty_method": self.uncertainty_method,
             "forward_simulation_restarts": self.restarts,
+            "forward_simulation_voltage": "median-filtered (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
             "fitted": list(self.names),
             "uncertainty": self.uncertainty,
             "initial": self.initial,
@@ -188,6 +196,8 @@ class FitResult:
         return Calibration(friction=p.friction, metadata=record, **extras)
 
     def summary(self) -> str:
+        from pendulab.calibration._polish import VOLTAGE_MEDIAN
+
         lines = [f"{'name':<11}{'start':>11}{'fitted':>11}{'± (1 sigma)':>13}"]
         for name in self.names:
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}{self.uncertainty[name]:>13.2g}")
@@ -199,6 +209,7 @@ class FitResult:
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
             f"max {self.forward_max * 1e6:.1f} um (encoder step {self.encoder_step * 1e6:.1f} um, accepted up to "
             f"{self.forward_limit * 1e6:.0f} um RMS)"
+            + (f"; the logged voltage is noisy and was replayed through a {VOLTAGE_MEDIAN}-sample median filter" if self.voltage_filtered else "")
         )
         return "\n".join(lines)
 
@@ -477,14 +488,9 @@ def fit_parameters(
     # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
     # them; the polish and the check see everything.
     pieces = _pieces(logs, samples_per_interval)
-    # The replay's compiled functions build in a thread beside the shooting functions (a first fit on a
-    # machine compiles both; the compilers then run side by side).
-    prebuild = None
-    if compile is not False:
-        import threading
-
-        prebuild = threading.Thread(target=_replay.prepare, args=(params0, [log.period for log in logs], names), daemon=True)
-        prebuild.start()
+    # The replay's compiled functions build in another process beside the shooting functions (a first
+    # fit on a machine compiles both; the compilers then run side by side).
+    prebuild = _replay.prepare_in_background(params0, [log.period for log in logs], names) if compile is not False else None
     for log in (piece for piece, _, _ in pieces):
         M = samples_per_interval(log)
         n_sub = max(1, int(math.ceil(log.period / max_substep - 1e-9)))
@@ -498,7 +504,7 @@ def fit_parameters(
         offset_w += block.n_w
         offset_r += block.n_r
     if prebuild is not None:
-        prebuild.join()
+        prebuild.wait()
     if any(f.built for f in functions.values()):
         progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
     problem = Problem(blocks, len(names), scales, theta0, regularization)
@@ -599,31 +605,41 @@ def fit_parameters(
                 break
             again = _polish.polish(searched, space, theta, max_iter=polish_iter, scan=())
             result = _polish.Polished(again.theta, again.cost, result.start_cost, result.iterations + again.iterations, result.replays + again.replays + 6)
+        if not with_pendulum and any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
+            # A logged voltage with sample noise the motor never saw (a measured, not a commanded,
+            # voltage) flips the stick-slip law's decisions near a threshold: a level 1 % below the
+            # breakaway force breaks away in the replay. Its median-filtered twin is tried at the answer,
+            # and kept (with a few more search steps) if the motion agrees with it better.
+            filtered = [_polish.denoised(a) for a in searched]
+            r_filtered = space.residuals(filtered, result.theta[None])[0]
+            if float(r_filtered @ r_filtered) < result.cost:
+                again = _polish.polish(filtered, space, result.theta, max_iter=polish_iter, scan=())
+                result = _polish.Polished(again.theta, again.cost, result.start_cost, result.iterations + again.iterations, result.replays + again.replays + 1)
+                replays = [_polish.denoised(a) for a in replays]
+                searched = filtered if searched is not candidate["replays"] else replays
         if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
             result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
         errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
         scale = float(np.mean([a.sigma[0] for a in replays]))
-        return {**candidate, "polished": result, "searched": searched, "polished_rms": float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * scale}
+        progress(f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * scale * 1e6:.0f} um")
+        return {**candidate, "replays": replays, "polished": result, "searched": searched, "polished_rms": float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * scale}
 
     # More starts where the first one's polished answer does not replay the logs (a local minimum of the
-    # smoothed problem): the logs' own estimate (cart alone), the lab's defaults; the better replay wins.
+    # smoothed problem): the lab's defaults, then the logs' own estimate (cart alone); the better replay wins.
     limit = FORWARD_LIMIT_STEPS * max(step, 1e-6)
     best = polished_fit(smoothed_fit(theta0))
-    others: list[tuple[str, np.ndarray]] = []
-    if start_from_logs and not with_pendulum and best["polished_rms"] > limit:
-        estimate = _start_from_logs(logs, params0, names, progress)
-        others.append(("the logs' own estimate", np.array([getattr(estimate, n) for n in names]) / scales))
     defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
-    others.append(("the lab's defaults", np.array([getattr(defaults, n) for n in names]) / scales))
-    tried = [theta0]
-    for label, theta_other in others:
-        if best["polished_rms"] <= limit:
-            break
-        if min(np.max(np.abs(theta_other / t - 1)) for t in tried) <= 0.05:
-            continue
-        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again from {label}")
-        tried.append(theta_other)
-        other = polished_fit(smoothed_fit(theta_other))
+    theta_default = np.array([getattr(defaults, n) for n in names]) / scales
+    if best["polished_rms"] > limit and np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
+        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again from the lab's defaults")
+        other = polished_fit(smoothed_fit(theta_default))
+        if other["polished_rms"] < best["polished_rms"]:
+            best = other
+    if best["polished_rms"] > limit and start_from_logs and not with_pendulum:
+        # Far from both starts: the logs' own estimate of the drive, the drag and F1.
+        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again from the logs' own estimate")
+        estimate = _start_from_logs(logs, params0, names, progress)
+        other = polished_fit(smoothed_fit(np.array([getattr(estimate, n) for n in names]) / scales))
         if other["polished_rms"] < best["polished_rms"]:
             best = other
     w_opt, stats, r_opt, J_opt, rms = best["w"], best["stats"], best["r"], best["J"], best["rms"]
@@ -631,7 +647,6 @@ def fit_parameters(
     theta_opt = polished.theta
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)
-    progress(f"polished on the replay under the true stick-slip law: {polished.iterations} iterations, {polished.replays} batched replays, cost {polished.start_cost:.4g} -> {polished.cost:.4g}")
 
     # Uncertainty: refits on parts of the logs (a few pattern-search steps each, no scans), at least the
     # width of the cost's profile; the smoothed problem's covariance where the logs cannot be cut.
@@ -665,6 +680,7 @@ def fit_parameters(
         uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
         uncertainty_method=uncertainty_method,
         restarts=sum(len(a.restarts) for a in replays),
+        voltage_filtered=any(a.denoised for a in replays),
         residual_rms=rms,
         params=params,
         n_samples=n_samples,
