@@ -27,8 +27,8 @@ def relative_errors(result, true: PlantParameters) -> dict[str, float]:
 
 
 #: (shape, noise on the logged voltage (V), the replay's RMS asserted, in encoder steps). The issue's bar
-#: is two steps; the sweep's answer sits in a local minimum of the replay at about five (see the note).
-OPEN_LOOP = [("fast steps", 0.0, 2.0), ("sine sweep", 0.0, 6.0), ("fast steps", 0.01, 3.0)]
+#: is two steps; measured here: 1.0, 1.9 and 1.8 (a little margin for another machine's compiler).
+OPEN_LOOP = [("fast steps", 0.0, 2.0), ("sine sweep", 0.0, 2.5), ("fast steps", 0.01, 2.5)]
 
 
 @pytest.fixture(scope="module", params=OPEN_LOOP, ids=lambda case: f"{case[0]}, {case[1] * 1e3:.0f} mV")
@@ -64,6 +64,7 @@ def test_ramps_with_rests_recover_the_drag_and_the_breakaway():
     for name in ("Beq", "force_gain", "F1", "B"):
         assert abs(errors[name]) <= WITHIN[name], f"{name} {100 * errors[name]:+.1f} %"
     assert result.forward_ok
+    assert result.forward_rms <= 3.0 * TRUE.q_x, f"replay RMS {result.forward_rms * 1e6:.0f} um"  # measured 2.4 steps
 
 
 def test_closed_loop_run_with_the_pendulum_up_uses_the_angle():

@@ -655,8 +655,14 @@ def fit_parameters(
         # A flat stretch of the replay's cost (a threshold no push of the logs probes) hides from the
         # parts' spread; the profile of the cost around the answer shows it.
         width = _polish.profile_width(searched, space, theta_opt)
-        uncertainty = np.maximum(spread[0], width)
-        uncertainty_method = f"spread of refits on {spread[1].shape[0]} parts of the logs, at least the width of the replay's cost profile"
+        # Parameters off together (Beq and the force gain) hide from both; the linearization with the
+        # errors' correlation keeps them.
+        linear = _polish.linearized_sigma(searched, space, theta_opt)
+        uncertainty = np.maximum.reduce([spread[0], width, linear])
+        uncertainty_method = (
+            f"the largest of: the spread of refits on {spread[1].shape[0]} parts of the logs, the width of the replay's cost profile, "
+            "and the replay's linearized covariance (with the errors' correlation length)"
+        )
     else:
         uncertainty, uncertainty_method = _uncertainty(problem, r_opt, J_opt), "least-squares covariance of the smoothed problem"
 
