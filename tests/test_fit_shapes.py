@@ -104,3 +104,22 @@ def test_a_replay_with_wrong_values_is_rejected():
     wrong = TRUE.with_values(Beq=TRUE.Beq * 0.84, force_gain=TRUE.force_gain * 0.84)
     x = replay([wrong], log.V[:-1], log.t[:-1], np.array([log.x[0], 0, 0, 0]))[0, :, 0]
     assert math.sqrt(np.mean((x - log.x[1:]) ** 2)) > good.forward_limit
+
+
+def test_a_sweep_logged_at_500_hz_fits_through_the_smoother_fallback():
+    # At 2 ms the smoothed fit with the narrow switches lands in a wrong basin (F1 -36 %, F2 +113 %,
+    # replay 74 encoder steps); the fallback with switches five times wider finds the answer.
+    import fit_logs
+
+    saved = fit_logs.STEP
+    fit_logs.STEP = 2e-3
+    try:
+        log = synthetic_log("sine sweep", duration=20.0, voltage_noise=0.0)
+    finally:
+        fit_logs.STEP = saved
+    assert log.period == pytest.approx(2e-3)
+    result = fit_parameters([log], PlantParameters.preset("none"), uncertainty_parts=False)
+    errors = relative_errors(result, TRUE)
+    for name, limit in WITHIN.items():
+        assert abs(errors[name]) <= limit, f"{name} {100 * errors[name]:+.1f} %"
+    assert result.forward_rms <= 2.5 * TRUE.q_x, f"replay RMS {result.forward_rms * 1e6:.0f} um"

@@ -31,10 +31,12 @@ local model errors, while the parameters still have to explain the motion of eve
 Gauss-Newton Hessian ``J^T J`` supplied (``grad_f``, ``hess_lag``); the constraints ``F1 <= F2`` and
 ``v1 <= v2`` and positivity bounds keep the friction model well ordered. Each fitted parameter is a
 decision variable divided by its starting value (or a typical size where that is 0). If the polished
-answer does not replay the logs (a local minimum), it is solved and polished again from the lab's
-defaults, then from a start estimated from the logs themselves (:mod:`pendulab.calibration._start`:
-force gain and ``Beq`` from the fast motion, ``F1`` from the rests, whatever the logs' shape); the
-better replay wins.
+answer misses the logs by more than :data:`WIDE_ABOVE_STEPS` encoder steps, it is solved and polished
+again with the law's switches :data:`WIDE_SWITCHES` times wider (a smoother problem with fewer wrong
+basins); if the answer still does not replay the logs (a local minimum), from the lab's defaults,
+then from a start estimated from the logs themselves (:mod:`pendulab.calibration._start`: force gain
+and ``Beq`` from the fast motion, ``F1`` from the rests, whatever the logs' shape). The better replay
+wins.
 
 *A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
 standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
@@ -226,10 +228,14 @@ FORWARD_LIMIT_STEPS = 20.0
 STICK_SPEED_WIDTH = 0.05  # x v1
 SLIP_SPEED_WIDTH = 0.02  # x v2
 FORCE_WIDTH = 0.01  # x F1, F2
+#: The fallback's switch widths, relative to the above, and the replay error (encoder steps) above
+#: which it is tried.
+WIDE_SWITCHES = 5.0
+WIDE_ABOVE_STEPS = 4.0
 
 
 @lru_cache(maxsize=None)
-def fit_model() -> tuple[ca.Function, ca.Function]:
+def fit_model(width_scale: float = 1.0) -> tuple[ca.Function, ca.Function]:
     """``(ode, rk4)`` of the plant with the friction law smoothed for fitting.
 
     The equations are :func:`pendulab.model.plant.plant_equations`; only its friction force node is
@@ -252,8 +258,9 @@ def fit_model() -> tuple[ca.Function, ca.Function]:
 
     speed = ca.sqrt(xdot**2 + (0.01 * p["v1"]) ** 2 + 1e-12)
     force = ca.sqrt(F_motor**2 + (0.01 * p["F1"]) ** 2 + 1e-12)
-    stick = step((p["v1"] - speed) / (STICK_SPEED_WIDTH * p["v1"] + 1e-6)) * step((p["F1"] - force) / (FORCE_WIDTH * p["F1"] + 1e-3))
-    slip = step((p["v2"] - speed) / (SLIP_SPEED_WIDTH * p["v2"] + 1e-6)) * step((p["F2"] - force) / (FORCE_WIDTH * p["F2"] + 1e-3))
+    k = width_scale
+    stick = step((p["v1"] - speed) / (k * STICK_SPEED_WIDTH * p["v1"] + 1e-6)) * step((p["F1"] - force) / (k * FORCE_WIDTH * p["F1"] + 1e-3))
+    slip = step((p["v2"] - speed) / (k * SLIP_SPEED_WIDTH * p["v2"] + 1e-6)) * step((p["F2"] - force) / (k * FORCE_WIDTH * p["F2"] + 1e-3))
     friction = -stick * F_motor - (1 - stick) * slip * p["B"] * xdot
     derivative = ca.graph_substitute(derivative, [signals["F_friction"]], [friction])
     ode = ca.Function("fit_ode", [state, V, pvec, t], [derivative]).expand()
@@ -481,104 +488,114 @@ def fit_parameters(
     theta0 = start / scales
     defect_sigma = np.asarray(process_noise, dtype=float)[:ns]
 
-    t_prepare = time.perf_counter()
-    functions: dict[tuple[int, int], IntervalFunctions] = {}
-    blocks: list[LogBlock] = []
-    offset_w, offset_r = len(names), 0
     # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
     # them; the polish and the check see everything.
     pieces = _pieces(logs, samples_per_interval)
     # The replay's compiled functions build in another process beside the shooting functions (a first
     # fit on a machine compiles both; the compilers then run side by side).
     prebuild = _replay.prepare_in_background(params0, [log.period for log in logs], names) if compile is not False else None
-    for log in (piece for piece, _, _ in pieces):
-        M = samples_per_interval(log)
-        n_sub = max(1, int(math.ceil(log.period / max_substep - 1e-9)))
-        if (M, n_sub) not in functions:
-            functions[M, n_sub] = IntervalFunctions(fit_model()[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, compile)
-        used = ((len(log) - 1) // M) * M + 1
-        sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-        nodes0 = _initial_states(log, with_pendulum)[:used:M]
-        block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
-        blocks.append(block)
-        offset_w += block.n_w
-        offset_r += block.n_r
-    if prebuild is not None:
-        prebuild.wait()
-    if any(f.built for f in functions.values()):
-        progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
-    problem = Problem(blocks, len(names), scales, theta0, regularization)
-    compiled = all(f.compiled for f in functions.values())
-
-    # IPOPT sees 1/2 |r(w)|^2 with the gradient J^T r and the Gauss-Newton Hessian J^T J.
-    w, r_jac, J = problem.w, problem.residuals_jac, problem.jacobian
-    p_none = ca.MX(0, 1)
-    grad_f = ca.Function("fit_grad_f", [w, p_none], [0.5 * ca.sumsqr(r_jac), ca.mtimes(J.T, r_jac)], ["x", "p"], ["f", "grad_f_x"])
-    lam_f = ca.MX.sym("lam_f")
-    theta = w[: len(names)]
-
-    def value_of(name: str) -> ca.MX | float:
-        return theta[names.index(name)] * scales[names.index(name)] if name in names else getattr(params0, name)
-
-    order = [value_of(high) - value_of(low) for low, high in (("F1", "F2"), ("v1", "v2")) if low in names or high in names]
-    g = ca.vertcat(*order) if order else ca.MX(0, 1)
-    lam_g = ca.MX.sym("lam_g", g.shape[0])
-    hess_lag = ca.Function(
-        "fit_gauss_newton", [w, p_none, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
-        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
-    )
-    options = {
-        "grad_f": grad_f,
-        "hess_lag": hess_lag,
-        "print_time": bool(verbose),
-        "calc_lam_p": False,
-        "calc_lam_x": False,
-        "no_nlp_grad": True,
-        "ipopt": {"max_iter": max_iter, "tol": tolerance, "acceptable_tol": 1e-1, "print_level": 5 if verbose else 0, "sb": "yes", "mu_init": 1e-4, "mu_strategy": "adaptive",
-                  "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-9},
-    }
-    lbx = np.concatenate([np.array([_LOWER[n] for n in names]) / scales, np.full(problem.n_w - len(names), -np.inf)])
-    ubx = np.concatenate([np.array([_UPPER[n] for n in names]) / scales, np.full(problem.n_w - len(names), np.inf)])
-    n_samples = sum(len(log) for log in logs)
-    n_intervals = sum(b.N for b in blocks)
-    progress(
-        f"fitting {', '.join(names)} to {len(logs)} log(s): {n_samples} samples, {n_intervals} shooting intervals"
-        + ("" if compiled else " (no C compiler: evaluating in CasADi's virtual machine, slower)")
-    )
-    solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
     step = float(params0.q_x)
-    solution_of = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])
+    n_samples = sum(len(log) for log in logs)
 
-    def smoothed_fit(theta_start: np.ndarray) -> dict[str, Any]:
-        """The smoothed problem solved from ``theta_start``: its answer, state estimates and the logs' anchors."""
-        x_start = np.concatenate([theta_start] + [b.nodes0.ravel() for b in blocks])
-        solution = solver(x0=x_start, lbx=lbx, ubx=ubx, lbg=np.zeros(g.shape[0]), ubg=np.full(g.shape[0], np.inf))
-        stats = solver.stats()
-        w_opt = np.asarray(solution["x"]).ravel()
-        progress(f"IPOPT (smoothed friction): {stats.get('return_status')} after {stats.get('iter_count')} iterations")
-        at_solution = solution_of(w_opt)
-        outputs = [np.asarray(y) for y in at_solution[2:]]
-        errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
-        _, nodes = problem.split(w_opt)
-        whole: list[_LogEstimate] = []
-        for j, log in enumerate(logs):
+    def build_smoothed(width_scale: float) -> tuple[Callable[[np.ndarray], dict[str, Any]], np.ndarray, np.ndarray]:
+        """The smoothed problem with the law's switch widths times ``width_scale``: its solve, and the bounds."""
+        nonlocal prebuild
+        t_prepare = time.perf_counter()
+        functions: dict[tuple[int, int], IntervalFunctions] = {}
+        blocks: list[LogBlock] = []
+        offset_w, offset_r = len(names), 0
+        for log in (piece for piece, _, _ in pieces):
             M = samples_per_interval(log)
+            n_sub = max(1, int(math.ceil(log.period / max_substep - 1e-9)))
+            if (M, n_sub) not in functions:
+                functions[M, n_sub] = IntervalFunctions(fit_model(width_scale)[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, compile)
             used = ((len(log) - 1) // M) * M + 1
-            estimates = _initial_states(log, with_pendulum)[:used:M].T.copy()
-            fitted = np.full(used, np.nan)
-            for (_, owner, first), b, S, y in zip(pieces, blocks, nodes, outputs):
-                if owner == j:
-                    k = first // M
-                    estimates[:, k : k + S.shape[1]] = S[:, : estimates.shape[1] - k]
-                    fitted[first : first + b.used] = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()][: used - first]
             sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-            whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
-        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, with_pendulum) for e in whole]
-        return {
-            "w": w_opt, "stats": stats, "r": np.asarray(at_solution[0]).ravel(), "J": at_solution[1],
-            "rms": float(np.sqrt(np.mean(errors**2))), "whole": whole, "replays": replays,
-        }
+            nodes0 = _initial_states(log, with_pendulum)[:used:M]
+            block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
+            blocks.append(block)
+            offset_w += block.n_w
+            offset_r += block.n_r
+        if prebuild is not None:
+            prebuild.wait()
+            prebuild = None
+        if any(f.built for f in functions.values()):
+            progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
+        problem = Problem(blocks, len(names), scales, theta0, regularization)
+        compiled = all(f.compiled for f in functions.values())
 
+        # IPOPT sees 1/2 |r(w)|^2 with the gradient J^T r and the Gauss-Newton Hessian J^T J.
+        w, r_jac, J = problem.w, problem.residuals_jac, problem.jacobian
+        p_none = ca.MX(0, 1)
+        grad_f = ca.Function("fit_grad_f", [w, p_none], [0.5 * ca.sumsqr(r_jac), ca.mtimes(J.T, r_jac)], ["x", "p"], ["f", "grad_f_x"])
+        lam_f = ca.MX.sym("lam_f")
+        theta = w[: len(names)]
+
+        def value_of(name: str) -> ca.MX | float:
+            return theta[names.index(name)] * scales[names.index(name)] if name in names else getattr(params0, name)
+
+        order = [value_of(high) - value_of(low) for low, high in (("F1", "F2"), ("v1", "v2")) if low in names or high in names]
+        g = ca.vertcat(*order) if order else ca.MX(0, 1)
+        lam_g = ca.MX.sym("lam_g", g.shape[0])
+        hess_lag = ca.Function(
+            "fit_gauss_newton", [w, p_none, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
+            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
+        )
+        options = {
+            "grad_f": grad_f,
+            "hess_lag": hess_lag,
+            "print_time": bool(verbose),
+            "calc_lam_p": False,
+            "calc_lam_x": False,
+            "no_nlp_grad": True,
+            "ipopt": {"max_iter": max_iter, "tol": tolerance, "acceptable_tol": 1e-1, "print_level": 5 if verbose else 0, "sb": "yes", "mu_init": 1e-4, "mu_strategy": "adaptive",
+                      "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-9},
+        }
+        lbx = np.concatenate([np.array([_LOWER[n] for n in names]) / scales, np.full(problem.n_w - len(names), -np.inf)])
+        ubx = np.concatenate([np.array([_UPPER[n] for n in names]) / scales, np.full(problem.n_w - len(names), np.inf)])
+        n_intervals = sum(b.N for b in blocks)
+        progress(
+            f"fitting {', '.join(names)} to {len(logs)} log(s): {n_samples} samples, {n_intervals} shooting intervals"
+            + (f" (the friction law's switches {width_scale:g} times wider)" if width_scale != 1 else "")
+            + ("" if compiled else " (no C compiler: evaluating in CasADi's virtual machine, slower)")
+        )
+        solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
+        solution_of = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])
+
+        def smoothed_fit(theta_start: np.ndarray) -> dict[str, Any]:
+            """The smoothed problem solved from ``theta_start``: its answer, state estimates and the logs' anchors."""
+            x_start = np.concatenate([theta_start] + [b.nodes0.ravel() for b in blocks])
+            solution = solver(x0=x_start, lbx=lbx, ubx=ubx, lbg=np.zeros(g.shape[0]), ubg=np.full(g.shape[0], np.inf))
+            stats = solver.stats()
+            w_opt = np.asarray(solution["x"]).ravel()
+            progress(f"IPOPT (smoothed friction): {stats.get('return_status')} after {stats.get('iter_count')} iterations")
+            at_solution = solution_of(w_opt)
+            outputs = [np.asarray(y) for y in at_solution[2:]]
+            errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
+            _, nodes = problem.split(w_opt)
+            whole: list[_LogEstimate] = []
+            for j, log in enumerate(logs):
+                M = samples_per_interval(log)
+                used = ((len(log) - 1) // M) * M + 1
+                estimates = _initial_states(log, with_pendulum)[:used:M].T.copy()
+                fitted = np.full(used, np.nan)
+                for (_, owner, first), b, S, y in zip(pieces, blocks, nodes, outputs):
+                    if owner == j:
+                        k = first // M
+                        estimates[:, k : k + S.shape[1]] = S[:, : estimates.shape[1] - k]
+                        fitted[first : first + b.used] = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()][: used - first]
+                sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
+                whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
+            replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, with_pendulum) for e in whole]
+            return {
+                "w": w_opt, "stats": stats, "r": np.asarray(at_solution[0]).ravel(), "J": at_solution[1],
+                "rms": float(np.sqrt(np.mean(errors**2))), "whole": whole, "replays": replays, "problem": problem,
+                "n_intervals": n_intervals,
+            }
+
+        return smoothed_fit, lbx, ubx
+
+    smoothed_fit, lbx, ubx = build_smoothed(1.0)
     lower, upper = lbx[: len(names)], ubx[: len(names)]
     prior = (theta0, regularization) if regularization > 0 else None
     space = _polish.Space(params0, names, scales, lower, upper, prior)
@@ -628,6 +645,14 @@ def fit_parameters(
     # smoothed problem): the lab's defaults, then the logs' own estimate (cart alone); the better replay wins.
     limit = FORWARD_LIMIT_STEPS * max(step, 1e-6)
     best = polished_fit(smoothed_fit(theta0))
+    if best["polished_rms"] > WIDE_ABOVE_STEPS * max(step, 1e-6):
+        # Wider switches make a smoother problem with fewer wrong basins (the polish removes their bias):
+        # a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit with them where the narrow ones fail.
+        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again with a smoother friction law")
+        smoothed_wide, _, _ = build_smoothed(WIDE_SWITCHES)
+        other = polished_fit(smoothed_wide(theta0))
+        if other["polished_rms"] < best["polished_rms"]:
+            best = other
     defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     theta_default = np.array([getattr(defaults, n) for n in names]) / scales
     if best["polished_rms"] > limit and np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
@@ -642,7 +667,7 @@ def fit_parameters(
         other = polished_fit(smoothed_fit(np.array([getattr(estimate, n) for n in names]) / scales))
         if other["polished_rms"] < best["polished_rms"]:
             best = other
-    w_opt, stats, r_opt, J_opt, rms = best["w"], best["stats"], best["r"], best["J"], best["rms"]
+    stats, r_opt, J_opt, rms = best["stats"], best["r"], best["J"], best["rms"]
     whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
     theta_opt = polished.theta
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
@@ -664,7 +689,7 @@ def fit_parameters(
             "and the replay's linearized covariance (with the errors' correlation length)"
         )
     else:
-        uncertainty, uncertainty_method = _uncertainty(problem, r_opt, J_opt), "least-squares covariance of the smoothed problem"
+        uncertainty, uncertainty_method = _uncertainty(best["problem"], r_opt, J_opt), "least-squares covariance of the smoothed problem"
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
     curves, forward_errors = [], []
@@ -690,7 +715,7 @@ def fit_parameters(
         residual_rms=rms,
         params=params,
         n_samples=n_samples,
-        n_intervals=n_intervals,
+        n_intervals=best["n_intervals"],
         iterations=int(stats.get("iter_count", -1)),
         success=bool(stats.get("success", False)),
         status=str(stats.get("return_status", "unknown")),
