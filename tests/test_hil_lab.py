@@ -32,10 +32,8 @@ def _fmus():
         ensure_fmu(name)
 
 
-@pytest.fixture(scope="module")
-def demo_run(tmp_path_factory):
-    """One full session: raised, started, poked, 12 s balancing, ended with the end key."""
-    out = tmp_path_factory.mktemp("lab") / "demo"
+def _demo_session(out):
+    """Raised, started, poked, 12 s of balancing, ended with the end key; whether the lab ended before the key."""
     with emulator("--raise-after", "0.3", "--poke", POKE) as emu:
         # (--max-delay 8: on a loaded machine the measured delay may exceed the default limit of 4)
         proc = lab_process("--port", emu.port, "--demo", "--max-delay", "8", "--out", str(out))
@@ -43,11 +41,32 @@ def demo_run(tmp_path_factory):
         proc.stdin.flush()  # type: ignore[union-attr]
         emu.wait_for("hand released", timeout=20)
         time.sleep(12.0)
-        proc.stdin.write("e\n")  # type: ignore[union-attr]
-        proc.stdin.flush()  # type: ignore[union-attr]
+        early = proc.poll() is not None
+        try:
+            proc.stdin.write("e\n")  # type: ignore[union-attr]
+            proc.stdin.flush()  # type: ignore[union-attr]
+        except BrokenPipeError:  # the lab already ended (its reason is in its output)
+            early = True
         stdout, stderr = proc.communicate(timeout=30)
         emu_text = emu.text
-    return out, proc.returncode, stdout, stderr, emu_text
+    return proc.returncode, stdout, stderr, emu_text, early
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """One full session; a second one if the first ended before the end key.
+
+    The emulator and the lab share this machine's two cores with whatever else runs: a session on a
+    loaded CI host can lose its real-time link (the lab then ends, motor off, log kept, as on a rig). That
+    is printed, and the session is run once more; the test fails if that one also ends early.
+    """
+    out = tmp_path_factory.mktemp("lab") / "demo"
+    status, stdout, stderr, emu_text, early = _demo_session(out)
+    if early:
+        print(f"first session ended before the end key (status {status}): {stdout.strip().splitlines()[-1:]} {stderr.strip()[-300:]}")
+        out = tmp_path_factory.mktemp("lab") / "demo"
+        status, stdout, stderr, emu_text, early = _demo_session(out)
+    return out, status, stdout, stderr, emu_text
 
 
 def test_demo_session_balances_and_writes_a_complete_run(demo_run):
