@@ -19,6 +19,12 @@ from pendulab.model.parameters import PlantParameters
 RIGS = {name: rig for name, rig in ALL_RIGS.items() if name != "unseen"}
 
 
+def anchors_of(log, step: float) -> _polish.Anchors:
+    """The log prepared for replays as the fit does it, with the smoothed log's states every 10 samples."""
+    used = ((len(log) - 1) // 10) * 10 + 1
+    return _polish.anchors(log, used, _initial_states(log, False)[:used:10].T, 10, np.array([_noise_level(log.x[:used])]), step, False)
+
+
 @pytest.mark.parametrize("shape", ["fast steps", "sine sweep", "ramps with rests"])
 @pytest.mark.parametrize("rig", list(RIGS))
 def test_drive_and_drag_come_from_fast_motion_of_any_shape(rig, shape):
@@ -56,10 +62,8 @@ def test_a_log_starting_at_rest_replays_from_rest_not_from_a_smoothed_speed():
     # a stuck cart would carry that as a lasting offset of v * Mc/Beq.
     true = RIGS["sticky"]
     log = synthetic_log("fast steps", true, duration=10.0, voltage_noise=0.0)
-    n = len(log)
-    nodes = _initial_states(log, False)[::10].T
-    assert abs(nodes[1, 0]) > 5e-4  # the smoothed speed at sample 0 (the true one is 0)
-    a = _polish.anchors(log, ((n - 1) // 10) * 10 + 1, nodes, 10, np.array([_noise_level(log.x)]), true.q_x, False)
+    assert abs(_initial_states(log, False)[0, 1]) > 5e-4  # the smoothed speed at sample 0 (the true one is 0)
+    a = anchors_of(log, true.q_x)
     assert abs(a.x0[1]) < 3e-4
     x = replay([true], a.V, a.t, a.x0, a.restarts)[0, :, 0]
     assert math.sqrt(np.mean((x - a.measured[:, 0]) ** 2)) < 2 * true.q_x
@@ -83,8 +87,7 @@ def test_a_noisy_logged_voltage_is_replayed_through_a_median_filter_that_keeps_i
     assert np.mean(np.abs(filtered - clean.V)) < 0.5 * np.mean(np.abs(noisy.V - clean.V))
     # This log holds a level 1 % below the breakaway force: the raw noisy voltage breaks the cart away
     # in the replay of the true values (tens of encoder steps), the filtered one does not.
-    n = len(noisy)
-    a = _polish.anchors(noisy, ((n - 1) // 10) * 10 + 1, _initial_states(noisy, False)[::10].T, 10, np.array([_noise_level(noisy.x)]), true.q_x, False)
+    a = anchors_of(noisy, true.q_x)
 
     def rms(V: np.ndarray) -> float:
         x = replay([true], V, a.t, a.x0, a.restarts)[0, :, 0]

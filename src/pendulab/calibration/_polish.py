@@ -183,6 +183,10 @@ class Polished:
     iterations: int
     replays: int
 
+    def then(self, later: "Polished", replays: int = 0) -> "Polished":
+        """This search continued by ``later`` (from this one's answer), with ``replays`` more in between."""
+        return Polished(later.theta, later.cost, self.start_cost, self.iterations + later.iterations, self.replays + later.replays + replays)
+
 
 @dataclass(frozen=True)
 class Space:
@@ -467,10 +471,10 @@ def linearized_sigma(logs: list[Anchors], space: Space, theta: np.ndarray, step:
     """
     n = len(theta)
     size = step * np.maximum(np.abs(theta), 1e-2)
-    trials = np.vstack([theta + np.diag(size), theta - np.diag(size)])
-    r0 = np.nan_to_num(replay_errors(logs, space.vectors(theta[None]), space.names)[0], nan=0.0)
+    trials = np.vstack([theta, theta + np.diag(size), theta - np.diag(size)])
     R = np.nan_to_num(replay_errors(logs, space.vectors(trials), space.names), nan=0.0)
-    J = ((R[:n] - R[n:]) / (2 * size[:, None])).T
+    r0 = R[0]
+    J = ((R[1 : n + 1] - R[n + 1 :]) / (2 * size[:, None])).T
     s2 = float(np.mean(r0**2))
     # Correlation length: 1 + 2 * the sum of the autocorrelation up to its first zero (per log, sample-weighted).
     lengths, weights = [], []

@@ -81,11 +81,17 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
     return f
 
 
+def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, ...], tuple[float, ...]]:
+    """``(free indices, fixed values)`` of a parameter vector: the key of its compiled replay (the same
+    for :func:`prepare` and :func:`replay`, so that a prepared library is the one a replay loads)."""
+    names = PlantParameters.names()
+    free_idx = tuple(range(len(names))) if free is None else tuple(names.index(n) for n in free)
+    return free_idx, tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vector))
+
+
 def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str], max_substep: float = MAX_SUBSTEP) -> None:
     """Build (or load) the compiled replays for every width in :data:`SET_COUNTS` ahead of use."""
-    names = PlantParameters.names()
-    free_idx = tuple(names.index(n) for n in free)
-    fixed = tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(params.as_vector()))
+    free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
     for period in sorted(set(periods)):
         for m in SET_COUNTS:
             _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True)
@@ -160,9 +166,7 @@ def replay(
         return replay(padded, V, t, x0, restarts, free=free, max_substep=max_substep, compile=compile)[:m]
     period = float(t[1] - t[0]) if n > 1 else 1e-3
     n_sub = substeps(period, max_substep)
-    names = PlantParameters.names()
-    free_idx = tuple(range(len(names))) if free is None else tuple(names.index(n) for n in free)
-    fixed = tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vectors[0]))
+    free_idx, fixed = _split(vectors[0], free)
     f = _chunk_function(n_sub, m, free_idx, fixed, bool(compile))
     n_chunks = -(-n // CHUNK)
     size = n_chunks * CHUNK

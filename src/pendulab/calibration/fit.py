@@ -455,10 +455,9 @@ def fit_parameters(
         Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
         same answer on a busy machine.
     start_from_logs : bool
-        Also consider a start estimated from the logs themselves (:mod:`pendulab.calibration._start`:
-        the drive and the drag from fast motion, the breakaway force from the rests) and start from
-        whichever of it and ``params0`` replays the logs better. Logs with the pendulum start from
-        ``params0``.
+        As a last try, when the other answers do not replay the logs, start from an estimate made
+        from the logs themselves (:mod:`pendulab.calibration._start`: the drive and the drag from
+        fast motion, the breakaway force from the rests). Not for logs with the pendulum.
 
     Returns
     -------
@@ -631,8 +630,7 @@ def fit_parameters(
             theta, cost = _polish.refine_pairs(searched, space, result.theta)
             if cost >= result.cost:
                 break
-            again = _polish.polish(searched, space, theta, max_iter=polish_iter, scan=())
-            result = _polish.Polished(again.theta, again.cost, result.start_cost, result.iterations + again.iterations, result.replays + again.replays + 6)
+            result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=6)
         if not with_pendulum and any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
             # A logged voltage with sample noise the motor never saw (a measured, not a commanded,
             # voltage) flips the stick-slip law's decisions near a threshold: a level 1 % below the
@@ -641,41 +639,44 @@ def fit_parameters(
             filtered = [_polish.denoised(a) for a in searched]
             r_filtered = space.residuals(filtered, result.theta[None])[0]
             if float(r_filtered @ r_filtered) < result.cost:
-                again = _polish.polish(filtered, space, result.theta, max_iter=polish_iter, scan=())
-                result = _polish.Polished(again.theta, again.cost, result.start_cost, result.iterations + again.iterations, result.replays + again.replays + 1)
-                replays = [_polish.denoised(a) for a in replays]
-                searched = filtered if searched is not candidate["replays"] else replays
+                result = result.then(_polish.polish(filtered, space, result.theta, max_iter=polish_iter, scan=()), replays=1)
+                replays = filtered if searched is replays else [_polish.denoised(a) for a in replays]
+                searched = filtered
         if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
             result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
         errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
-        scale = float(np.mean([a.sigma[0] for a in replays]))
-        progress(f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * scale * 1e6:.0f} um")
-        return {**candidate, "replays": replays, "polished": result, "searched": searched, "polished_rms": float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * scale}
+        rms_replay = float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * float(np.mean([a.sigma[0] for a in replays]))
+        progress(
+            f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): "
+            f"cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {rms_replay * 1e6:.0f} um"
+        )
+        return {**candidate, "replays": replays, "polished": result, "searched": searched, "polished_rms": rms_replay}
 
-    # More starts where the first one's polished answer does not replay the logs (a local minimum of the
-    # smoothed problem): the lab's defaults, then the logs' own estimate (cart alone); the better replay wins.
-    limit = FORWARD_LIMIT_STEPS * max(step, 1e-6)
+    # More tries while the polished answer misses the logs (a local minimum of the smoothed problem), each
+    # above its own threshold (encoder steps): wider switches make a smoother problem with fewer wrong
+    # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
+    # with them where the narrow ones fail); then the lab's defaults; then the logs' own estimate of the
+    # drive, the drag and F1 (cart alone). A try's answer wins only if it replays clearly better.
     best = polished_fit(smoothed_fit(theta0))
-    if best["polished_rms"] > WIDE_ABOVE_STEPS * max(step, 1e-6):
-        # Wider switches make a smoother problem with fewer wrong basins (the polish removes their bias):
-        # a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit with them where the narrow ones fail.
-        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again with a smoother friction law")
-        smoothed_wide, _, _ = build_smoothed(WIDE_SWITCHES)
-        other = polished_fit(smoothed_wide(theta0))
-        if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
-            best = other
     defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     theta_default = np.array([getattr(defaults, n) for n in names]) / scales
-    if best["polished_rms"] > limit and np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
-        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again from the lab's defaults")
-        other = polished_fit(smoothed_fit(theta_default))
-        if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
-            best = other
-    if best["polished_rms"] > limit and start_from_logs and not with_pendulum:
-        # Far from both starts: the logs' own estimate of the drive, the drag and F1.
-        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again from the logs' own estimate")
+
+    def from_estimate() -> dict[str, Any]:
         estimate = _start_from_logs(logs, params0, names, progress)
-        other = polished_fit(smoothed_fit(np.array([getattr(estimate, n) for n in names]) / scales))
+        return smoothed_fit(np.array([getattr(estimate, n) for n in names]) / scales)
+
+    tries: list[tuple[float, str, Callable[[], dict[str, Any]]]] = [
+        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: build_smoothed(WIDE_SWITCHES)[0](theta0)),
+    ]
+    if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
+        tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed_fit(theta_default)))
+    if start_from_logs and not with_pendulum:
+        tries.append((FORWARD_LIMIT_STEPS, "from the logs' own estimate", from_estimate))
+    for above, label, solve in tries:
+        if best["polished_rms"] <= above * max(step, 1e-6):
+            continue
+        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again {label}")
+        other = polished_fit(solve())
         if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
             best = other
     stats, r_opt, J_opt, rms = best["stats"], best["r"], best["J"], best["rms"]
