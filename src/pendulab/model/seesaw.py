@@ -1,0 +1,351 @@
+"""The seesaw: the IP02 cart on Quanser's SEESAW-E module, in the same CasADi model family as the pendulum.
+
+The cart runs on a track that sits on a seesaw; the seesaw pivots and the cart, driven by the same motor
+and amplifier, balances it. The motor, the amplifier's limits, the stick-slip friction law and the
+encoders are the pendulum plant's own (:mod:`pendulab.model.plant`); only the mechanics differ.
+
+Coordinates (SPEC §2): ``x`` along the track from its centre (m), ``theta`` the seesaw's tilt from level
+(rad, positive counter-clockwise facing the cart: the +x end up). States ``[x, xdot, theta, thetadot]``.
+
+Equations of motion (Lagrange; the cart a point mass ``mc`` at height ``D_T`` above the pivot, the
+seesaw and track a rigid body of mass ``M_sw`` with its centre of gravity ``D_C`` above the pivot and
+inertia ``J_sw`` about the pivot)::
+
+    M(x) [xddot, thetaddot] = [F_net + mc x thetadot^2 - mc g sin(theta),
+                               -2 mc x xdot thetadot - mc g (x cos(theta) - D_T sin(theta))
+                               + M_sw g D_C sin(theta) - B_sw thetadot]
+    M(x) = [[m_x, -mc D_T], [-mc D_T, J_sw + mc (x^2 + D_T^2)]]
+    F_net = F_motor + F_friction - Beq xdot,   m_x = mc + rotor_inertia * eta_g Kg^2 Jm / r_mp^2
+
+A tap (a rectangular pulse added to ``thetaddot``, like the pendulum's poke) is the disturbance. Quanser's
+model (``SEESAW_ABCD_eqns.m``) neglects the rotor inertia: ``rotor_inertia = 0`` is the default, so that
+its published matrices check ours; ``rotor_inertia = 1`` lumps it into the cart's inertia along the track.
+
+Examples
+--------
+>>> from pendulab.model.seesaw import SeesawModel, SeesawParameters
+>>> p = SeesawParameters()
+>>> d = SeesawModel().ode([0.01, 0, 0, 0], 0.0, p.as_vector(), 0.0)
+>>> float(d[3]) < 0        # the cart on the +x side tips the seesaw down on that side
+True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, fields
+from functools import lru_cache
+from typing import Any, Mapping, Sequence
+
+import casadi as ca
+import control
+import numpy as np
+
+from pendulab.errors import ParameterError
+from pendulab.model.parameters import PlantParameters, _p
+from pendulab.model.plant import MAX_SUBSTEP, _amplifier, _friction_regime, mean_poke_acceleration, poke_acceleration, quantize, substeps
+
+STATES = ("x", "xdot", "theta", "thetadot")
+#: Outputs of :attr:`SeesawModel.outputs`, in order.
+OUTPUTS = ("theta_measured", "x_measured", "V_applied", "F_friction")
+#: Seesaw tilt per encoder count: a 1024-line encoder read in quadrature (x4) behind a 3:1 gear
+#: (``config_ssw.m``: ``KE_SW = 2*pi/(4*1024)``, ``Kgs = 3``).
+SEESAW_COUNT = 2 * math.pi / 4096 / 3
+
+
+def _cart_field(name: str) -> Any:
+    """A field of the cart, motor, amplifier, friction or cart encoder, as the pendulum plant declares it."""
+    f = PlantParameters.__dataclass_fields__[name]
+    m = f.metadata
+    return _p(f.default, m["unit"], m["description"], minimum=m["min"], positive=m["positive"])
+
+
+@dataclass(frozen=True)
+class SeesawParameters:
+    """Every parameter of the seesaw plant, in SI units.
+
+    The cart, motor, amplifier, friction and cart-encoder fields are the pendulum plant's
+    (:class:`~pendulab.model.parameters.PlantParameters`, same names, units and defaults: the IP02 without
+    its extra weight). The seesaw's values come from Quanser's 2012 courseware (``config_ssw.m``).
+    """
+
+    M_cart: float = _cart_field("M_cart")
+    Beq: float = _cart_field("Beq")
+    Rm: float = _cart_field("Rm")
+    Kt: float = _cart_field("Kt")
+    Km: float = _cart_field("Km")
+    Kg: float = _cart_field("Kg")
+    eta_g: float = _cart_field("eta_g")
+    eta_m: float = _cart_field("eta_m")
+    Jm: float = _cart_field("Jm")
+    r_mp: float = _cart_field("r_mp")
+    force_gain: float = _cart_field("force_gain")
+    g: float = _cart_field("g")
+    V_max: float = _cart_field("V_max")
+    I_max: float = _cart_field("I_max")
+    F1: float = _cart_field("F1")
+    v1: float = _cart_field("v1")
+    F2: float = _cart_field("F2")
+    v2: float = _cart_field("v2")
+    B: float = _cart_field("B")
+    q_x: float = _cart_field("q_x")
+    track_half_length: float = _cart_field("track_half_length")
+    rotor_inertia: float = _p(0.0, "1", "1 lumps the motor's rotor inertia into the cart along the track; 0 neglects it (Quanser's model)")
+    # the seesaw (config_ssw.m)
+    M_sw: float = _p(3.6, "kg", "Mass of the seesaw and track, without the cart", positive=True)
+    D_T: float = _p(0.125, "m", "Pivot to the track (the cart's centre of gravity)")
+    D_C: float = _p(0.058, "m", "Pivot to the centre of gravity of seesaw and track, above the pivot")
+    J_sw: float = _p(0.395, "kg.m2", "Inertia of the seesaw and track about the pivot", positive=True)
+    B_sw: float = _p(0.0, "N.m.s/rad", "Viscous damping at the pivot")
+    q_theta: float = _p(SEESAW_COUNT, "rad", "Tilt encoder step (0 = no quantization)")
+    theta_stop: float = _p(
+        math.radians(11.5), "rad", "Tilt end stops: the seesaw rests on the floor at +/- this tilt", positive=True
+    )
+    # tap: a rectangular pulse added to the tilt's angular acceleration
+    tap_magnitude: float = _p(3.0, "rad/s2", "Tap magnitude", minimum=-math.inf)
+    tap_duration: float = _p(0.1, "s", "Tap duration")
+    tap_start: float = _p(1.0, "s", "Tap start time")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise ParameterError(f"seesaw parameter {f.name}={value!r} is not a finite number; give a real value in {f.metadata['unit']}")
+            if value < f.metadata["min"]:
+                raise ParameterError(f"seesaw parameter {f.name}={value} is negative; it must be >= 0 {f.metadata['unit']}")
+            if f.metadata["positive"] and value <= 0:
+                raise ParameterError(f"seesaw parameter {f.name}={value} must be > 0 {f.metadata['unit']}")
+        if self.rotor_inertia not in (0.0, 1.0):
+            raise ParameterError(f"seesaw parameter rotor_inertia={self.rotor_inertia} must be 0 (neglected) or 1 (lumped)")
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """Field names in their fixed order (the order of the CasADi parameter vector)."""
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, float]) -> "SeesawParameters":
+        """Build from a mapping of field names; unknown names are an error."""
+        unknown = sorted(set(values) - set(cls.names()))
+        if unknown:
+            raise ParameterError(f"unknown seesaw parameter {unknown[0]!r}; known ones are {', '.join(cls.names())}")
+        return cls(**{k: float(v) for k, v in values.items()})
+
+    def with_values(self, **values: float) -> "SeesawParameters":
+        """A copy with some fields changed (validated like a new object)."""
+        return type(self).from_mapping({**self.as_dict(), **values})
+
+    def as_dict(self) -> dict[str, float]:
+        return dataclasses.asdict(self)
+
+    def as_vector(self) -> list[float]:
+        return [getattr(self, n) for n in self.names()]
+
+    def without_nonlinearities(self) -> "SeesawParameters":
+        """Friction, quantization, current limit and tap off (the linearization's assumptions)."""
+        return self.with_values(F1=0.0, F2=0.0, q_theta=0.0, q_x=0.0, I_max=0.0, tap_magnitude=0.0)
+
+
+def _tap(p: dict[str, ca.SX]) -> dict[str, ca.SX]:
+    # The tap is the poke's pulse on another axis: the poke's functions read these names.
+    return {"poke_magnitude": p["tap_magnitude"], "poke_duration": p["tap_duration"], "poke_start": p["tap_start"]}
+
+
+def seesaw_equations(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, *, tap: ca.SX | None = None) -> tuple[ca.SX, dict[str, ca.SX]]:
+    """The right-hand side of the seesaw and its intermediate signals (see the module's docstring).
+
+    Parameters
+    ----------
+    state : SX (4,)
+        ``[x, xdot, theta, thetadot]``.
+    V : SX
+        Voltage command before the amplifier.
+    p : dict of SX
+        Parameters by name (:class:`SeesawParameters`).
+    t : SX
+        Time, for the tap.
+    tap : SX, optional
+        The tap's angular acceleration; default the pulse at ``t``.
+
+    Returns
+    -------
+    derivative : SX (4,)
+    signals : dict
+        ``V_applied``, ``F_motor``, ``F_friction``.
+    """
+    x, xdot, theta, thetadot = state[0], state[1], state[2], state[3]
+    V_applied, _, _, F_motor = _amplifier(V, xdot, p, None)
+    friction = _friction_regime(xdot, F_motor, p)
+    F_friction = ca.if_else(friction > 1.5, -F_motor, ca.if_else(friction > 0.5, -p["B"] * xdot, 0.0))
+    F_net = F_motor + F_friction - p["Beq"] * xdot
+
+    mc, Dt, g = p["M_cart"], p["D_T"], p["g"]
+    m_x = mc + p["rotor_inertia"] * p["eta_g"] * p["Kg"] ** 2 * p["Jm"] / p["r_mp"] ** 2
+    m_theta = p["J_sw"] + mc * (x**2 + Dt**2)
+    rhs_x = F_net + mc * x * thetadot**2 - mc * g * ca.sin(theta)
+    rhs_theta = (
+        -2 * mc * x * xdot * thetadot
+        - mc * g * (x * ca.cos(theta) - Dt * ca.sin(theta))
+        + p["M_sw"] * g * p["D_C"] * ca.sin(theta)
+        - p["B_sw"] * thetadot
+    )
+    det = m_x * m_theta - (mc * Dt) ** 2
+    if tap is None:
+        tap = poke_acceleration(_tap(p), t)
+    xddot = (m_theta * rhs_x + mc * Dt * rhs_theta) / det
+    thetaddot = (m_x * rhs_theta + mc * Dt * rhs_x) / det + tap
+
+    # End stops. The cart at a track end stops dead there as on the pendulum's track; the seesaw at a
+    # tilt stop rests on the floor, and the cart then runs on a fixed incline.
+    L, stop = p["track_half_length"], p["theta_stop"]
+    tilt_held = ca.logic_or(
+        ca.logic_and(ca.logic_and(theta >= stop, thetadot >= 0), thetaddot > 0),
+        ca.logic_and(ca.logic_and(theta <= -stop, thetadot <= 0), thetaddot < 0),
+    )
+    xddot = ca.if_else(tilt_held, rhs_x / m_x, xddot)
+    thetaddot = ca.if_else(tilt_held, 0.0, thetaddot)
+    cart_held = ca.logic_or(
+        ca.logic_and(ca.logic_and(x >= L, xdot >= 0), xddot > 0),
+        ca.logic_and(ca.logic_and(x <= -L, xdot <= 0), xddot < 0),
+    )
+    derivative = ca.vertcat(
+        ca.if_else(cart_held, 0.0, xdot),
+        ca.if_else(cart_held, 0.0, xddot),
+        ca.if_else(tilt_held, 0.0, thetadot),
+        thetaddot,
+    )
+    return derivative, {"V_applied": V_applied, "F_motor": F_motor, "F_friction": F_friction}
+
+
+def _clamp_to_stop(position: ca.SX, speed: ca.SX, limit: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """A sub-step that carries a coordinate past its stop ends on the stop, with no outward speed."""
+    clamped = ca.fmin(ca.fmax(position, -limit), limit)
+    speed = ca.if_else(position >= limit, ca.fmin(speed, 0.0), ca.if_else(position <= -limit, ca.fmax(speed, 0.0), speed))
+    return clamped, speed
+
+
+@dataclass(frozen=True)
+class SeesawModel:
+    """Numerical CasADi functions of the seesaw, built from :func:`seesaw_equations`.
+
+    Attributes
+    ----------
+    ode : casadi.Function
+        ``seesaw_ode(state[4], V, p[np], t) -> derivative[4]``
+    outputs : casadi.Function
+        ``seesaw_outputs(state[4], V, p[np], t) -> [theta_measured, x_measured, V_applied, F_friction]``
+    rk4 : casadi.Function
+        ``seesaw_rk4(state[4], V, p[np], t, h) -> state after one RK4 step of length h``
+    """
+
+    @property
+    def ode(self) -> ca.Function:
+        return _functions()[0]
+
+    @property
+    def outputs(self) -> ca.Function:
+        return _functions()[1]
+
+    @property
+    def rk4(self) -> ca.Function:
+        return _functions()[2]
+
+    def simulate(
+        self,
+        params: SeesawParameters,
+        V: Sequence[float] | np.ndarray,
+        step: float = 1e-3,
+        x0: Sequence[float] = (0.0, 0.0, 0.0, 0.0),
+        substep: float = MAX_SUBSTEP,
+    ) -> np.ndarray:
+        """Reference integration: RK4 sub-steps, voltage held per step; the states at ``t = 0, step, ...``."""
+        n_sub = substeps(step, substep)
+        h = step / n_sub
+        p = np.asarray(params.as_vector())
+        out = np.empty((len(V) + 1, 4))
+        out[0] = state = np.asarray(x0, dtype=float)
+        for k, v in enumerate(np.asarray(V, dtype=float)):
+            for i in range(n_sub):
+                state = np.asarray(self.rk4(state, v, p, k * step + i * h, h)).ravel()
+            out[k + 1] = state
+        return out
+
+
+@lru_cache(maxsize=None)
+def _functions() -> tuple[ca.Function, ca.Function, ca.Function]:
+    state, V, t, h = ca.SX.sym("state", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
+    pvec = ca.SX.sym("p", len(SeesawParameters.names()))
+    p = {name: pvec[i] for i, name in enumerate(SeesawParameters.names())}
+    names = ["state", "V", "p", "t"]
+    derivative, signals = seesaw_equations(state, V, p, t)
+    ode = ca.Function("seesaw_ode", [state, V, pvec, t], [derivative], names, ["derivative"])
+    measured = ca.vertcat(quantize(state[2], p["q_theta"]), quantize(state[0], p["q_x"]), signals["V_applied"], signals["F_friction"])
+    outputs = ca.Function("seesaw_outputs", [state, V, pvec, t], [measured], names, ["y"])
+    tap = mean_poke_acceleration(_tap(p), t, h)  # the pulse's impulse exact wherever its edges fall
+
+    def f(s: ca.SX) -> ca.SX:
+        return seesaw_equations(s, V, p, t, tap=tap)[0]
+
+    k1 = f(state)
+    k2 = f(state + h / 2 * k1)
+    k3 = f(state + h / 2 * k2)
+    k4 = f(state + h * k3)
+    stepped = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    x, xdot = _clamp_to_stop(stepped[0], stepped[1], p["track_half_length"])
+    theta, thetadot = _clamp_to_stop(stepped[2], stepped[3], p["theta_stop"])
+    rk4 = ca.Function("seesaw_rk4", [state, V, pvec, t, h], [ca.vertcat(x, xdot, theta, thetadot)], [*names, "h"], ["next"])
+    return ode, outputs, rk4
+
+
+# ---------------------------------------------------------------------------------------------- linear
+OUTPUT_NAMES = ("theta", "x")
+
+
+@dataclass(frozen=True)
+class LinearSeesaw:
+    """The seesaw linearized about level with the cart centred.
+
+    Attributes
+    ----------
+    ss : control.StateSpace
+        States ``x, xdot, theta, thetadot``; input ``V``; outputs ``theta, x``.
+    params : SeesawParameters
+        The parameters it was linearized with (nonlinearities off).
+    """
+
+    ss: control.StateSpace
+    params: SeesawParameters
+
+    def tf(self, output: str = "theta") -> control.TransferFunction:
+        """Minimal transfer function from ``V`` to ``output`` (``theta`` or ``x``)."""
+        index = OUTPUT_NAMES.index(output)
+        siso = control.ss(self.ss.A, self.ss.B, self.ss.C[index : index + 1, :], self.ss.D[index : index + 1, :])
+        return control.minreal(control.tf(siso), tol=1e-6, verbose=False)
+
+    @property
+    def poles(self) -> np.ndarray:
+        """Open-loop poles, sorted by real part."""
+        poles = np.linalg.eigvals(self.ss.A)
+        return poles[np.lexsort((poles.imag, poles.real))]
+
+
+def linearize_seesaw(params: SeesawParameters | None = None) -> LinearSeesaw:
+    """Linearize the CasADi seesaw about ``x = xdot = theta = thetadot = 0``, ``V = 0``.
+
+    Examples
+    --------
+    >>> from pendulab.model.seesaw import linearize_seesaw
+    >>> lin = linearize_seesaw()
+    >>> int((lin.poles.real > 0).sum())     # the seesaw alone is unstable
+    1
+    """
+    params = (params or SeesawParameters()).without_nonlinearities()
+    state, V = ca.SX.sym("s", 4), ca.SX.sym("V")
+    f = SeesawModel().ode(state, V, params.as_vector(), 0.0)
+    jac = ca.Function("seesaw_linearization", [state, V], [ca.jacobian(f, state), ca.jacobian(f, V)])
+    A, B = (np.array(m, dtype=float) for m in jac(np.zeros(4), 0.0))
+    C = np.zeros((2, 4))
+    C[0, 2] = C[1, 0] = 1.0
+    ss = control.ss(A, B, C, np.zeros((2, 1)), states=list(STATES), inputs=["V"], outputs=list(OUTPUT_NAMES), name="seesaw")
+    return LinearSeesaw(ss=ss, params=params)
