@@ -131,3 +131,14 @@ def test_the_tilt_encoder_counts_a_4096_line_quadrature_encoder_behind_a_3_to_1_
 def test_bad_seesaw_parameters_are_refused_with_the_name(bad: dict[str, float]) -> None:
     with pytest.raises(ParameterError, match=next(iter(bad))):
         SeesawParameters(**bad)
+
+
+def test_the_seesaw_modules_examples_run() -> None:
+    import doctest
+
+    from pendulab.control import state_feedback
+    from pendulab.model import seesaw
+
+    for module in (seesaw, state_feedback):
+        result = doctest.testmod(module)
+        assert result.attempted > 0 and result.failed == 0

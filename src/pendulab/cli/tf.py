@@ -17,6 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="print the linearized transfer function of the plant",
         description="Linearize the plant about the upright equilibrium and print the minimal transfer function.",
     )
+    parser.add_argument("--plant", choices=("pendulum", "seesaw"), default="pendulum",
+                        help="plant (default pendulum); the seesaw prints theta/V, x/V and the open-loop poles")
     add_plant_options(parser)
     parser.add_argument("--output", choices=("alpha", "x", "tip"), default="alpha", help="output signal (default alpha)")
     parser.add_argument("--json", action="store_true", help='print one JSON object {"zeros", "poles", "gain"}')
@@ -52,7 +54,40 @@ def format_zpk(zeros: np.ndarray, poles: np.ndarray, gain: float) -> str:
     return f"{text} / ({denominator})" if len(poles) > 1 else f"{text} / {denominator}"
 
 
+def _polynomial(coefficients: np.ndarray) -> list[float]:
+    c = np.atleast_1d(np.asarray(coefficients, dtype=float))
+    c = np.where(np.abs(c) > 1e-9 * np.max(np.abs(c)), c, 0.0)  # round-off, not a coefficient
+    first = int(np.argmax(c != 0)) if np.any(c != 0) else len(c) - 1
+    return [float(v) for v in c[first:]]
+
+
+def run_seesaw(args: argparse.Namespace) -> int:
+    """The seesaw's linear model: theta/V and x/V, and the open-loop poles."""
+    if args.root_locus or controller_from_args(args) is not None or args.output != "alpha" or args.calibration:
+        raise UserError("--plant seesaw takes no controller, --output, --calibration or --root-locus: it prints theta/V, x/V and the poles")
+    from pendulab.model.seesaw import linearize_seesaw
+
+    plant = linearize_seesaw()
+    poles = plant.poles
+    result: dict = {"plant": "seesaw", "poles": [[float(p.real), float(p.imag)] for p in poles]}
+    lines = []
+    for output in ("theta", "x"):
+        g = plant.tf(output)
+        num, den = _polynomial(g.num[0][0]), _polynomial(g.den[0][0])
+        zeros = np.roots(num) if len(num) > 1 else np.array([])
+        result[output] = {"num": num, "den": den, "zeros": [[float(z.real), float(z.imag)] for z in zeros]}
+        lines.append(f"{output}/V = {format_zpk(np.sort_complex(zeros), poles, num[0] / den[0])}")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print("\n".join(lines))
+        print("open-loop poles: " + ", ".join(f"{p.real:.4g}" if p.imag == 0 else f"{p.real:.4g}{p.imag:+.4g}j" for p in poles))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.plant == "seesaw":
+        return run_seesaw(args)
     params = plant_parameters_from_args(args)
     if params.Mp == 0:
         raise UserError("the cart without a pendulum has no angle to linearize; choose --pendulum long or short")

@@ -1,0 +1,243 @@
+"""State feedback (LQR) for either plant: the pendulum on its cart, or the seesaw.
+
+The feedback vector is ordered positions first, then velocities, then the optional integral of the angle,
+as Quanser's courseware orders it: ``[x, angle, xdot, angledot(, integral of angle)]``, where the angle is
+``alpha`` (pendulum) or ``theta`` (seesaw). The control law is ``V = -K state``.
+
+Quanser's seesaw lab (``setup_ip02_ssw.m``) uses Q = diag(1000, 5000, 0, 0, 2000) and R = 0.5 with the
+integral, and estimates the velocities with second-order derivative filters (10 Hz, damping 0.9); its
+integral is limited to +/-10 degrees. Those are the seesaw's defaults here.
+
+Examples
+--------
+>>> from pendulab.control.state_feedback import design_state_feedback
+>>> design = design_state_feedback("seesaw")
+>>> [round(float(k), 1) for k in design.K]          # the SEESAW Laboratory Guide prints 180.797 -224.3485 ...
+[180.8, -224.3, 16.7, -67.0, -63.2]
+>>> bool(all(design.closed_loop_poles.real < 0))
+True
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from pendulab.errors import UserError
+
+PLANTS = ("pendulum", "seesaw")
+#: Default weights per plant: (Q diagonal, R, integral).
+DEFAULTS = {
+    "seesaw": ((1000.0, 5000.0, 0.0, 0.0, 2000.0), 0.5, True),
+    # Bryson's rule as in the LQR block example (pendulab.blocks.lqr): about 2 cm and 1.3 deg per volt.
+    "pendulum": ((2000.0, 2000.0, 0.0, 0.0), 1.0, False),
+}
+#: Quanser's velocity estimate: a second-order derivative filter, 10 Hz, damping 0.9 (setup_ip02_ssw.m).
+FILTER_HZ, FILTER_ZETA = 10.0, 0.9
+#: Quanser's limit on the tilt's integral (MAX_I_WINDUP = 10 deg, setup_ip02_ssw.m).
+INTEGRAL_LIMIT = math.radians(10.0)
+
+
+def state_names(plant: str, integral: bool) -> tuple[str, ...]:
+    """The feedback vector's order for ``plant``."""
+    angle = "alpha" if plant == "pendulum" else "theta"
+    names = ("x", angle, "xdot", f"{angle}dot")
+    return (*names, f"{angle}_integral") if integral else names
+
+
+@dataclass(frozen=True)
+class StateFeedbackDesign:
+    """An LQR design: the gain, the closed loop's poles and everything that made them.
+
+    Attributes
+    ----------
+    plant : {"pendulum", "seesaw"}
+    states : tuple of str
+        The feedback vector's order (:func:`state_names`).
+    K : numpy.ndarray
+        Gains, ``V = -K state``.
+    closed_loop_poles : numpy.ndarray
+        Eigenvalues of ``A - B K`` of the continuous linear model.
+    q, r : weights of the design.
+    """
+
+    plant: str
+    states: tuple[str, ...]
+    K: np.ndarray
+    closed_loop_poles: np.ndarray
+    q: tuple[float, ...]
+    r: float
+    filter_hz: float = FILTER_HZ
+    filter_zeta: float = FILTER_ZETA
+    integral_limit: float = INTEGRAL_LIMIT
+
+    @property
+    def integral(self) -> bool:
+        return len(self.states) == 5
+
+    def to_dict(self) -> dict:
+        """The design as a controller file's ``[state_feedback]`` table."""
+        table = {
+            "plant": self.plant,
+            "states": list(self.states),
+            "K": [float(k) for k in self.K],
+            "q": list(self.q),
+            "r": self.r,
+            "derivative_filter_hz": self.filter_hz,
+            "derivative_filter_zeta": self.filter_zeta,
+        }
+        if self.integral:
+            table["integral_limit"] = self.integral_limit
+        return {"state_feedback": table}
+
+
+def _linear_plant(plant: str, params: object | None) -> tuple[np.ndarray, np.ndarray]:
+    """A and B of the plant's linear model, reordered to positions first."""
+    order = [0, 2, 1, 3]  # the models' [x, xdot, angle, angledot] -> [x, angle, xdot, angledot]
+    if plant == "seesaw":
+        from pendulab.model.seesaw import linearize_seesaw
+
+        ss = linearize_seesaw(params).ss  # type: ignore[arg-type]
+    else:
+        from pendulab.model.linear import linearize
+
+        ss = linearize(params).ss  # type: ignore[arg-type]
+    return ss.A[np.ix_(order, order)], ss.B[order]
+
+
+def design_state_feedback(
+    plant: str = "seesaw",
+    q: Sequence[float] | None = None,
+    r: float | None = None,
+    integral: bool | None = None,
+    params: object | None = None,
+) -> StateFeedbackDesign:
+    """Design an LQR state feedback on the plant's linear model.
+
+    Parameters
+    ----------
+    plant : {"pendulum", "seesaw"}
+        Which plant.
+    q : sequence of float, optional
+        Diagonal of Q, one weight per entry of :func:`state_names` (4, or 5 with the integral).
+        Default: Quanser's seesaw weights, or the pendulum block example's.
+    r : float, optional
+        Weight of the voltage (> 0).
+    integral : bool, optional
+        Add the integral of the angle to the state. Default: True for the seesaw, False for the pendulum;
+        given ``q`` of length 5 implies True.
+    params : PlantParameters or SeesawParameters, optional
+        The plant's parameters (default preset).
+
+    Returns
+    -------
+    StateFeedbackDesign
+
+    Raises
+    ------
+    UserError
+        An unknown plant, a Q of the wrong length or with a negative or non-finite entry, R not > 0.
+    """
+    if plant not in PLANTS:
+        raise UserError(f"unknown plant {plant!r}; choose pendulum or seesaw")
+    default_q, default_r, default_integral = DEFAULTS[plant]
+    if integral is None:
+        integral = len(q) == 5 if q is not None else default_integral
+    n = 5 if integral else 4
+    if q is None:
+        q = default_q if len(default_q) == n else (*default_q[:4], 1000.0)[:n]
+    q = tuple(float(v) for v in q)
+    names = state_names(plant, integral)
+    if len(q) != n:
+        raise UserError(
+            f"--q has {len(q)} weights but the state has {n} ({', '.join(names)}); give one weight per state "
+            f"({'4 without' if integral else '5 with'} --integral)"
+        )
+    if not all(math.isfinite(v) and v >= 0 for v in q):
+        raise UserError(f"--q weights must be finite and >= 0, got {','.join(f'{v:g}' for v in q)}")
+    r = default_r if r is None else float(r)
+    if not (math.isfinite(r) and r > 0):
+        raise UserError(f"--r must be a finite number > 0 (the voltage's weight), got {r:g}")
+    import control
+
+    A, B = _linear_plant(plant, params)
+    if integral:
+        A = np.block([[A, np.zeros((4, 1))], [np.eye(1, 4, 1), np.zeros((1, 1))]])  # d/dt integral = angle
+        B = np.vstack([B, [[0.0]]])
+    try:
+        K, _, poles = control.lqr(A, B, np.diag(q), r)
+    except Exception as exc:  # an undetectable or unstabilizable weighting
+        raise UserError(f"no LQR solution for Q = diag({', '.join(f'{v:g}' for v in q)}), R = {r:g}: {exc}; weight the angle and x") from None
+    poles = np.asarray(poles)
+    return StateFeedbackDesign(plant, names, np.ravel(np.asarray(K)), poles[np.lexsort((poles.imag, poles.real))], q, r)
+
+
+def save_state_feedback_file(design: StateFeedbackDesign, path: str) -> None:
+    """Write the design as a TOML controller file (``[state_feedback]``), atomically."""
+    from pathlib import Path
+
+    from pendulab.analysis.results import atomic_write
+
+    def value(v: object) -> str:
+        if isinstance(v, str):
+            return json_string(v)
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(float(v))  # type: ignore[arg-type]
+
+    table = design.to_dict()["state_feedback"]
+    lines = [f"# pendulab state feedback (LQR): V = -K [{', '.join(design.states)}]", "", "[state_feedback]"]
+    lines += [f"{key} = {value(v)}" for key, v in table.items()]
+    text = "\n".join(lines) + "\n"
+    try:
+        atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
+    except OSError as exc:
+        raise UserError(f"cannot write controller file {path}: {exc.strerror or exc}; check the folder") from None
+
+
+def json_string(text: str) -> str:
+    import json
+
+    return json.dumps(text)
+
+
+def load_state_feedback_file(path: str) -> StateFeedbackDesign:
+    """Read a ``[state_feedback]`` controller file written by :func:`save_state_feedback_file`.
+
+    Raises
+    ------
+    UserError
+        The file is missing, not TOML, or its table is incomplete or inconsistent.
+    """
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib  # type: ignore[no-redef]
+    try:
+        with open(path, "rb") as handle:
+            data = tomllib.load(handle)
+    except OSError as exc:
+        raise UserError(f"cannot read controller file {path}: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"controller file {path} is not valid TOML: {exc}") from None
+    table = data.get("state_feedback")
+    if not isinstance(table, dict):
+        raise UserError(f"controller file {path} has no [state_feedback] table; write one with 'pendulab lqr --out FILE'")
+    try:
+        plant, K = table["plant"], [float(k) for k in table["K"]]
+        states = tuple(str(s) for s in table["states"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UserError(f"controller file {path}: [state_feedback] needs plant, states and K ({exc})") from None
+    if plant not in PLANTS or states != state_names(plant, len(states) == 5) or len(K) != len(states):
+        raise UserError(f"controller file {path}: states {list(states)} and K of length {len(K)} do not fit the {plant}")
+    if not all(math.isfinite(k) for k in K):
+        raise UserError(f"controller file {path}: every gain in K must be finite")
+    q = tuple(float(v) for v in table.get("q", ()))
+    return StateFeedbackDesign(
+        plant, states, np.asarray(K), np.asarray([]), q, float(table.get("r", math.nan)),
+        float(table.get("derivative_filter_hz", FILTER_HZ)), float(table.get("derivative_filter_zeta", FILTER_ZETA)),
+        float(table.get("integral_limit", INTEGRAL_LIMIT)),
+    )
