@@ -80,3 +80,11 @@ def supervisor_fmu() -> Path:
 def loop_fmus(plant_fmu: Path, controller_fmu: Path, supervisor_fmu: Path) -> dict[str, Path]:
     """The three FMUs of the lab's loop (built once), by component name."""
     return {"plant": plant_fmu, "controller": controller_fmu, "supervisor": supervisor_fmu}
+
+
+@pytest.fixture(scope="session")
+def seesaw_fmu() -> Path:
+    """Path of ``fmus/Seesaw.fmu``, built first if it is missing or older than its sources."""
+    from pendulab.fmu.build import ensure_fmu
+
+    return ensure_fmu("Seesaw")

@@ -36,6 +36,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, fields
 from functools import lru_cache
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import casadi as ca
@@ -250,6 +251,18 @@ class SeesawModel:
     @property
     def rk4(self) -> ca.Function:
         return _functions()[2]
+
+    def generate_c(self, directory: Path, name: str = "seesaw_casadi") -> Path:
+        """Write the C code of ``seesaw_ode``, ``seesaw_outputs`` and ``seesaw_rk4`` to ``directory``.
+
+        Returns the path of the ``.c`` file; a header of the same stem is written beside it.
+        """
+        directory.mkdir(parents=True, exist_ok=True)
+        gen = ca.CodeGenerator(f"{name}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
+        for function in (self.ode, self.outputs, self.rk4):
+            gen.add(function)
+        gen.generate(str(directory) + "/")
+        return directory / f"{name}.c"
 
     def simulate(
         self,
