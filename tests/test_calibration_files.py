@@ -163,7 +163,9 @@ def test_save_is_atomic_and_leaves_nothing_half_written(tmp_path, monkeypatch):
             raise OSError("disk full")
 
     monkeypatch.setattr(files.os, "fdopen", Exploding)
-    with pytest.raises(OSError, match="disk full"):
+    from pendulab.errors import CalibrationError
+
+    with pytest.raises(CalibrationError, match="disk full"):  # one line for the user, not a traceback
         save_calibration(Calibration((2.0, 0.004, 3.5, 0.06, 25.0)), target)
     assert target.read_text() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cal.json"]

@@ -30,7 +30,6 @@ import json
 import math
 import os
 import re
-import secrets
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping, Sequence
@@ -40,6 +39,7 @@ import scipy.io
 
 import pendulab
 from pendulab.errors import UserError
+from pendulab.outputs import atomic_write, create_temporary, write_temporary as _write_temporary  # noqa: F401 - re-exported
 
 #: The columns of every run file, in this order (SPEC §7).
 COLUMNS = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state")
@@ -129,51 +129,6 @@ def write_results(
     finally:
         for tmp in temporaries.values():
             tmp.unlink(missing_ok=True)
-
-
-def atomic_write(path: str | os.PathLike[str], write: Any) -> Path:
-    """Call ``write(binary_file)`` on a temporary file beside ``path``, then move it to ``path``.
-
-    Used for every file pendulab writes (plots and animations too), so that a crash or an error
-    never leaves a truncated file under the final name.
-    """
-    path = Path(path)
-    tmp = _write_temporary(path.parent, path.name, write)
-    try:
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
-
-
-def create_temporary(folder: str | os.PathLike[str], name: str) -> tuple[int, Path]:
-    """Create a new hidden temporary file for ``name`` in ``folder``; returns ``(fd, path)``.
-
-    Unlike :func:`tempfile.mkstemp` the file gets the normal permissions (0666 less the umask),
-    so the file that replaces the final name is readable like any other output.
-    """
-    stem, dot, suffix = name.rpartition(".")
-    for _ in range(100):
-        # Keep the real suffix last: some writers (Pillow) pick the format from it.
-        tmp = Path(folder) / f".{stem or name}.{secrets.token_hex(4)}.tmp{dot}{suffix if dot else ''}"
-        try:
-            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
-        except FileExistsError:
-            continue
-    raise FileExistsError(f"cannot create a temporary file for {name} in {folder}")
-
-
-def _write_temporary(folder: Path, name: str, write: Any) -> Path:
-    fd, tmp = create_temporary(folder, name)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return tmp
 
 
 def _column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:

@@ -39,7 +39,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -274,7 +273,7 @@ def default_calibration() -> Calibration:
 
 # ---------------------------------------------------------------------- writing
 def save_calibration(calibration: Calibration, path: str | os.PathLike[str]) -> Path:
-    """Write ``calibration`` as JSON, atomically (temporary file in the same folder, then rename).
+    """Write ``calibration`` as JSON, atomically with the user's umask (:func:`pendulab.outputs.atomic_write`).
 
     A reader never sees a half-written file, and an error leaves any previous file untouched.
     """
@@ -287,20 +286,10 @@ def save_calibration(calibration: Calibration, path: str | os.PathLike[str]) -> 
     except OSError as exc:
         raise CalibrationError(f"cannot create the folder for {path}: {exc.strerror or exc}") from None
     text = json.dumps(calibration.to_dict(), indent=2, allow_nan=False) + "\n"
+    from pendulab.outputs import atomic_write
+
     try:
-        fd, partial = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".part")
+        atomic_write(path, lambda handle: handle.write(text.encode("utf-8")))
     except OSError as exc:
         raise CalibrationError(f"cannot write {path}: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(partial, path)
-    except BaseException:
-        try:
-            os.unlink(partial)
-        except OSError:
-            pass
-        raise
     return path

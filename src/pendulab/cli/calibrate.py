@@ -8,7 +8,9 @@ import datetime as _dt
 import sys
 from pathlib import Path
 
+from pendulab.cli.options import add_overwrite_option
 from pendulab.errors import CalibrationError
+from pendulab.outputs import check_output_file
 from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
 
 
@@ -37,6 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", metavar="FILE", help="calibration file to write (default calibration/<date>-<rig>.json)")
     parser.add_argument("--log", metavar="CSV", help="also save the ramp-test log (t, V, x) for 'pendulab fit'")
     parser.add_argument("--x0", type=float, default=0.05, metavar="M", help="virtual rig: where the cart starts (default 0.05 m)")
+    add_overwrite_option(parser)
     parser.add_argument("--backend", default="auto", choices=("auto", "fmu", "casadi"), help=argparse.SUPPRESS)
     parser.set_defaults(func=run)
 
@@ -68,19 +71,6 @@ def _friction(text: str) -> tuple[float, ...]:
     return values
 
 
-def _check_writable(path: Path, what: str) -> None:
-    """Fail before a long run, not after it."""
-    if path.is_dir():
-        raise CalibrationError(f"{what} {path} is a directory; give a file name")
-    folder = path.parent if str(path.parent) else Path(".")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CalibrationError(f"cannot create the folder of {what} {path}: {exc.strerror or exc}") from None
-    if not folder.is_dir():
-        raise CalibrationError(f"the folder of {what} {path} is not a directory")
-
-
 def run(args: argparse.Namespace) -> int:
     from pendulab.calibration.extract import extract_friction, mass_ratio
     from pendulab.calibration.files import save_calibration
@@ -99,9 +89,9 @@ def run(args: argparse.Namespace) -> int:
 
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("calibration") / f"{stamp}-{'rig' if args.port else 'virtual'}.json"
-    _check_writable(out, "--out")
+    check_output_file(out, "--out", suffixes=(".json",), overwrite=args.overwrite)
     if args.log:
-        _check_writable(Path(args.log), "--log")
+        check_output_file(args.log, "--log", suffixes=(".csv",), overwrite=args.overwrite)
     nominal = PlantParameters.preset(pendulum="none", cart=args.cart)
     ratio = mass_ratio(PlantParameters.preset(pendulum=args.pendulum, cart=args.cart))
     true = nominal.with_values(**dict(zip(FRICTION_NAMES, args.friction))) if args.friction else nominal

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pendulab.cli.options import add_overwrite_option
 from pendulab.errors import UserError
+from pendulab.outputs import check_output_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,6 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("runs", nargs="+", metavar="RUN", help="run folders or run.mat/run.csv files, or folders of the old lab's .mat logs")
     parser.add_argument("--out", type=Path, default=Path("."), metavar="DIR", help="where comparison.txt and comparison.png go (default: here)")
     parser.add_argument("--pendulum", default="long", choices=("long", "short"), help="pendulum of the old lab's logs (for the tip); default long")
+    add_overwrite_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -33,6 +36,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise UserError(f"--out {args.out} is a file; give a folder")
+    for name in ("comparison.txt", "comparison.png"):
+        check_output_file(args.out / name, "--out", overwrite=args.overwrite)
     Lp = PlantParameters.preset(pendulum=args.pendulum).Lp
     text, written = compare_runs(args.runs, args.out, Lp=Lp)
     print(text)

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-from pathlib import Path
 
+from pendulab.cli.options import add_overwrite_option
 from pendulab.errors import CalibrationError, FitRejected
+from pendulab.outputs import check_output_file
 from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
 
 
@@ -41,22 +42,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="scale the fitted F1, F2 by the mass ratio for this pendulum (logs taken without it)")
     parser.add_argument("--out", metavar="FILE", help="write the fitted values as a calibration file (JSON)")
     parser.add_argument("--plot", metavar="PNG", help="plot measured against refitted motion")
+    add_overwrite_option(parser)
     parser.add_argument("--interval", type=float, default=0.01, metavar="S", help="shooting interval (default 0.01 s)")
     parser.set_defaults(func=run)
-
-
-def _check_output(path: str, what: str, suffix: str | None = None) -> Path:
-    target = Path(path)
-    if target.is_dir():
-        raise CalibrationError(f"{what} {target} is a directory; give a file name")
-    if suffix and target.suffix.lower() != suffix:
-        raise CalibrationError(f"{what} {target} must end in {suffix}")
-    folder = target.parent if str(target.parent) else Path(".")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CalibrationError(f"cannot create the folder of {what} {target}: {exc.strerror or exc}") from None
-    return target
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,8 +59,8 @@ def run(args: argparse.Namespace) -> int:
         raise CalibrationError(f"--fit: cannot fit {unknown[0]!r}; choose among {', '.join(FITTABLE)}")
     if not (0 < args.interval <= 1.0):
         raise CalibrationError(f"--interval {args.interval} must be in (0, 1] s")
-    out = _check_output(args.out, "--out") if args.out else None
-    plot = _check_output(args.plot, "--plot", ".png") if args.plot else None
+    out = check_output_file(args.out, "--out", suffixes=(".json",), overwrite=args.overwrite) if args.out else None
+    plot = check_output_file(args.plot, "--plot", suffixes=(".png",), overwrite=args.overwrite) if args.plot else None
 
     params0 = PlantParameters.preset(pendulum=args.pendulum, cart=args.cart)
     if args.calibration:

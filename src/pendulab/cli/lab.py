@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from pathlib import Path
 
-from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
+from pendulab.cli.options import (
+    add_controller_options, add_overwrite_option, add_plant_options, controller_from_args, plant_parameters_from_args,
+)
 from pendulab.errors import UserError
 from pendulab.hil.protocol import DEFAULT_MAX_DELAY
+from pendulab.outputs import run_folder
 
 
 
@@ -41,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--stop-time", type=float, metavar="T", help="end the session by itself T s after streaming starts")
     parser.add_argument("--method", choices=("tustin", "zoh"), default="tustin", help="discretization (default tustin)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="run folder (default: a new folder under runs/)")
+    add_overwrite_option(parser)
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
     parser.add_argument("--compare", action="store_true", help="also simulate the same controller at the same delay and write the comparison")
     parser.add_argument("--poke", metavar="MAG,DUR,START", help="the poke to simulate for --compare (default 50,0.005,1; the rig's poke is detected)")
@@ -70,9 +73,8 @@ def run(args: argparse.Namespace) -> int:
 
     poke = parse_poke(args.poke) if args.poke else POKE_DEFAULT
     params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
-    out_dir = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-lab-{args.pendulum}"
-    if out_dir.exists() and not out_dir.is_dir():
-        raise UserError(f"output folder {out_dir} is a file; give a folder name for --out")
+    folder = run_folder(args.out, f"lab-{args.pendulum}", overwrite=args.overwrite)
+    out_dir = folder.path
 
     from pendulab.control.realization import discretize
     from pendulab.hil.keys import KeySource
@@ -106,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         except LinkLost as exc:
             raise UserError(f"{exc} (while setting up the session)") from None
         say(f"transport delay N = {delay} ({priority}); encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
+        folder.prepare(announce=say)
         with KeySource() as keys:
             session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say,
                                  priority=priority)

@@ -82,3 +82,9 @@ def controller_from_args(args: argparse.Namespace) -> Any | None:
     return base
 
 
+
+
+def add_overwrite_option(parser: argparse.ArgumentParser) -> None:
+    """``--overwrite``: replace an earlier result at the output path (refused without it; see :mod:`pendulab.outputs`)."""
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an earlier result at the output path (its files are removed first; without this, refused)")

@@ -9,8 +9,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
+from pendulab.cli.options import (
+    add_controller_options, add_overwrite_option, add_plant_options, controller_from_args, plant_parameters_from_args,
+)
 from pendulab.errors import UserError
+from pendulab.outputs import run_folder
 
 POKE_DEFAULT = (50.0, 0.005, 1.0)
 #: Longest run in steps (the log is kept in memory): 2000 s at 1 kHz.
@@ -44,6 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="transport delay of N control periods before the plant, as on the rig (default 0; compare with a rig run at its N)")
     parser.add_argument("--no-quantization", action="store_true", help="ideal encoders (no quantization)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: a new folder under runs/)")
+    add_overwrite_option(parser)
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
     parser.add_argument("--animate", action="store_true", help="also write an animation (GIF) of the rig")
     parser.add_argument("--ssp", nargs="?", const="Plant", choices=("Plant", "Plant3"), metavar="PLANT",
@@ -107,9 +111,8 @@ def run(args: argparse.Namespace) -> int:
     params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
     if args.no_quantization:
         params = params.with_values(q_alpha=0.0, q_x=0.0)
-    out_dir = args.out or _new_run_dir(args.pendulum)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise UserError(f"output folder {out_dir} is a file; give a folder name for --out")
+    folder = run_folder(args.out, args.pendulum, overwrite=args.overwrite)
+    out_dir = folder.path
 
     from pendulab.analysis.results import write_results
     from pendulab.cosim.pendulum import simulate_poke
@@ -136,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"the simulation failed: {exc}; check the controller, the poke and the parameters") from None
     if sys.stderr.isatty():
         print("\r" + " " * 40 + "\r", end="", file=sys.stderr)
+    folder.prepare()
     paths = write_results(out_dir, result.columns, result.meta, result.metrics)
     written = [Path(p) for p in (paths.values() if isinstance(paths, dict) else paths)]
     if args.plot:
@@ -159,16 +163,6 @@ def run(args: argparse.Namespace) -> int:
         written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=args.stop_time))
     _print_summary(result, out_dir, written, time.perf_counter() - started)
     return 0
-
-
-def _new_run_dir(pendulum: str) -> Path:
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    base = Path("runs") / f"{stamp}-{pendulum}"
-    path, k = base, 1
-    while path.exists():
-        k += 1
-        path = Path(f"{base}-{k}")
-    return path
 
 
 def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
