@@ -142,3 +142,36 @@ def test_the_seesaw_modules_examples_run() -> None:
     for module in (seesaw, state_feedback):
         result = doctest.testmod(module)
         assert result.attempted > 0 and result.failed == 0
+
+
+@pytest.mark.parametrize("method", ["tustin", "zoh"])
+def test_quanser_s_controller_realized_with_its_filters_stabilizes_the_sampled_seesaw(method: str) -> None:
+    from scipy.signal import cont2discrete
+
+    from pendulab.control.state_feedback import design_state_feedback, realize_state_feedback
+
+    h = 1e-3
+    design = design_state_feedback("seesaw")
+    block = realize_state_feedback(design, h, method)
+    lin = linearize_seesaw().ss
+    measured = np.array([[0, 0, 1, 0], [1, 0, 0, 0]])  # the controller's inputs: [theta, x]
+    Ap, Bp, _, _, _ = cont2discrete((lin.A, lin.B, measured, np.zeros((2, 1))), h, "zoh")
+    closed = np.block([[Ap + Bp @ block.D @ measured, Bp @ block.C], [block.B @ measured, block.A]])
+    radii = np.sort(np.abs(np.linalg.eigvals(closed)))
+    assert radii[-1] < 1
+    # The slowest closed-loop pole is the ideal state feedback's slowest (the filters are 10x faster).
+    slowest = min(abs(p.real) for p in design.closed_loop_poles)
+    assert -np.log(radii[-1]) / h == pytest.approx(slowest, rel=0.05)
+
+
+def test_the_derivative_filter_estimates_a_ramp_s_slope() -> None:
+    from pendulab.control.state_feedback import design_state_feedback, realize_state_feedback
+
+    design = design_state_feedback("seesaw", integral=False, q=(1, 1, 0, 0))
+    block = realize_state_feedback(design.__class__(design.plant, design.states, np.array([0.0, 0.0, 1.0, 0.0]), design.closed_loop_poles, design.q, design.r))
+    z = np.zeros(block.order)
+    for k in range(1000):  # the cart moves at 0.2 m/s for 1 s
+        u = np.array([0.0, 0.2 * k * block.h])
+        V = (block.C @ z + block.D @ u).item()
+        z = block.A @ z + block.B @ u
+    assert -V == pytest.approx(0.2, rel=1e-3)  # V = -K_xdot * xdot_estimate

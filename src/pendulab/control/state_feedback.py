@@ -241,3 +241,76 @@ def load_state_feedback_file(path: str) -> StateFeedbackDesign:
         float(table.get("derivative_filter_hz", FILTER_HZ)), float(table.get("derivative_filter_zeta", FILTER_ZETA)),
         float(table.get("integral_limit", INTEGRAL_LIMIT)),
     )
+
+
+@dataclass(frozen=True)
+class StateFeedbackRealization:
+    """The state feedback with its derivative filters and integral as one discrete LTI block.
+
+    Inputs ``u = [angle, x]`` (measured), output ``V``::
+
+        z[k+1] = A z[k] + B u[k],   V[k] = C z[k] + D u[k]
+
+    The states are the two derivative filters (two each, the cart's then the angle's) and, with the
+    integral, the angle's integral last (forward Euler), limited to ``+/- integral_limit``.
+
+    Attributes
+    ----------
+    A, B, C, D : numpy.ndarray
+        Shapes (n, n), (n, 2), (1, n), (1, 2).
+    integral_index : int
+        1-based index of the integral state, 0 for none.
+    integral_limit : float
+        Limit of the integral state (rad s).
+    h : float
+        Sample period (s).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    integral_index: int
+    integral_limit: float
+    h: float
+
+    @property
+    def order(self) -> int:
+        return int(self.A.shape[0])
+
+
+def realize_state_feedback(design: StateFeedbackDesign, h: float = 1e-3, method: str = "tustin") -> StateFeedbackRealization:
+    """Realize ``V = -K [x, angle, xdot, angledot(, integral)]`` with the velocities from 2nd-order
+    derivative filters ``wf^2 s / (s^2 + 2 zeta wf s + wf^2)`` (Quanser's, 10 Hz and 0.9 by default),
+    discretized at ``h`` by ``method`` ("tustin" or "zoh"), the integral by forward Euler.
+
+    Examples
+    --------
+    >>> from pendulab.control.state_feedback import design_state_feedback, realize_state_feedback
+    >>> block = realize_state_feedback(design_state_feedback("seesaw"))
+    >>> block.order, block.integral_index
+    (5, 5)
+    """
+    from pendulab.control.realization import _bilinear, _zero_order_hold
+
+    if method not in ("tustin", "zoh"):
+        raise UserError(f"unknown discretization method {method!r}; choose tustin or zoh")
+    if not (math.isfinite(h) and h > 0):
+        raise UserError(f"sample period h={h} must be a positive number of seconds")
+    wf, zeta = 2 * math.pi * design.filter_hz, design.filter_zeta
+    K = np.asarray(design.K, dtype=float)
+    # One filter: z1' = z2, z2' = -wf^2 z1 - 2 zeta wf z2 + y; its derivative estimate is wf^2 z2.
+    Af = np.array([[0.0, 1.0], [-wf * wf, -2 * zeta * wf]])
+    A = np.zeros((4, 4))
+    A[:2, :2] = A[2:, 2:] = Af
+    B = np.zeros((4, 2))
+    B[1, 1] = 1.0  # the cart's filter sees x (input 2)
+    B[3, 0] = 1.0  # the angle's filter sees the angle (input 1)
+    C = -np.array([[0.0, K[2] * wf * wf, 0.0, K[3] * wf * wf]])
+    D = -np.array([[K[1], K[0]]])
+    Ad, Bd, Cd, Dd = (_bilinear if method == "tustin" else _zero_order_hold)(A, B, C, D, h)
+    if design.integral:
+        Ad = np.block([[Ad, np.zeros((4, 1))], [np.zeros((1, 4)), np.ones((1, 1))]])
+        Bd = np.vstack([Bd, [[h, 0.0]]])
+        Cd = np.hstack([Cd, [[-K[4]]]])
+    return StateFeedbackRealization(Ad, Bd, Cd, Dd, 5 if design.integral else 0, design.integral_limit, h)
