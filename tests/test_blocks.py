@@ -181,7 +181,7 @@ def test_lqr_velocity_estimates_follow_the_plant(lqr_run) -> None:
 def test_lqr_without_gains_fails_initialization_with_its_reason(tmp_path: Path) -> None:
     fmu = build_block(LQRController, tmp_path)  # class defaults: all gains zero
     with pytest.raises(SimulationError, match="no gains"):
-        simulate_block_controller(fmu, stop_time=0.1)
+        simulate_block_controller(fmu, PlantParameters.preset(poke_start=0.05), stop_time=0.1)
 
 
 # ---------------------------------------------------------------------------------------- a user's block
@@ -274,7 +274,7 @@ def test_block_raising_in_the_master_ends_the_run_with_its_reason(tmp_path: Path
                     raise RuntimeError("boom")
     '''))
     with pytest.raises(SimulationError, match=r"Boom \(step at t = 0\.2 s\): RuntimeError: boom"):
-        simulate_block_controller(build_block(source, tmp_path), stop_time=0.5)
+        simulate_block_controller(build_block(source, tmp_path), PlantParameters.preset(poke_start=0.1), stop_time=0.5)
 
 
 # ---------------------------------------------------------------------------------------- bad input

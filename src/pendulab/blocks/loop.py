@@ -36,6 +36,7 @@ def block_controller_system(
     supervisor: Mapping[str, Any] | None = None,
     controller_parameters: Mapping[str, Any] | None = None,
     fmu_dir: Path | None = None,
+    delay: int = 0,
 ):
     """The three-component loop with the block FMU as controller; plant signals wired by name."""
     from fmpy import read_model_description
@@ -53,7 +54,8 @@ def block_controller_system(
         raise UserError(f"{fmu.name} cannot be the loop's controller: it lacks {', '.join(missing)}")
     params = params or PlantParameters.preset()
     system = pendulum_system(
-        params, dict(controller_parameters or {}), step=step, supervisor=supervisor, fmu_dir=fmu_dir, controller_fmu=fmu
+        params, dict(controller_parameters or {}), step=step, supervisor=supervisor, fmu_dir=fmu_dir, controller_fmu=fmu,
+        delay=delay,
     )
     wired = {target for _, target in CONNECTIONS}
     for name in PLANT_SIGNALS:
@@ -73,7 +75,7 @@ def simulate_block_controller(
     record: Sequence[str] = (),
     fmu_dir: Path | None = None,
 ):
-    """Simulate the poke run with a block controller; like :func:`pendulab.cosim.pendulum.simulate_poke`.
+    """Simulate the poke run with a block controller: :func:`pendulab.simulate` of a spec with ``controller.fmu``.
 
     Parameters
     ----------
@@ -83,40 +85,16 @@ def simulate_block_controller(
 
     Returns
     -------
-    pendulab.cosim.pendulum.SimulationResult
+    pendulab.simulation.SimulationResult
     """
-    from pendulab import __version__
-    from pendulab.analysis.metrics import compute_metrics
-    from pendulab.blocks.base import block_error
-    from pendulab.cosim.master import Master, SimulationError
-    from pendulab.cosim.pendulum import RECORDED, SimulationResult, collect_columns
     from pendulab.model.parameters import PlantParameters
+    from pendulab.simulation import simulate
+    from pendulab.spec import ControllerSpec, RunSpec, Supervisor, Timing
 
     params = params or PlantParameters.preset()
-    system = block_controller_system(
-        fmu, params, step=step, supervisor=supervisor, controller_parameters=controller_parameters, fmu_dir=fmu_dir
-    )
-    with Master(system) as master:
-        try:
-            log = master.run(stop_time, [*RECORDED, *record])
-        except SimulationError as exc:
-            detail = block_error("controller")
-            if detail:
-                raise SimulationError(f"{exc}: {detail}") from exc
-            raise
-    columns = collect_columns(log, params)
-    safety_cut = columns.pop("_safety_cut_time")
-    metrics = compute_metrics(
-        columns["t"], columns["alpha"], poke_start=params.poke_start, q_alpha=params.q_alpha,
-        xdot=columns["xdot"], safety_cut_time=safety_cut,
-    )
-    for name in record:
-        columns[name] = log[name]
-    meta = {
-        "controller": f"Python block {Path(fmu).name}",
-        "step": step,
-        "parameters": params.as_dict(),
-        "version": __version__,
-        "safety_cut_time": safety_cut,
-    }
-    return SimulationResult(columns, metrics, meta)
+    controller = ControllerSpec(fmu=str(fmu), parameters=dict(controller_parameters or {}))
+    spec = RunSpec.for_parameters(controller, params, timing=Timing(stop_time=stop_time, step=step),
+                                  supervisor=Supervisor(**dict(supervisor or {})))
+    result = simulate(spec, record=record, fmu_dir=fmu_dir)
+    result.meta.pop("pendulum")
+    return result

@@ -7,17 +7,15 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pendulab.cli.options import (
-    add_controller_options, add_overwrite_option, add_plant_options, controller_from_args, plant_parameters_from_args,
-)
+from pendulab.cli.options import add_controller_options, add_overwrite_option, add_plant_options, controller_from_args
 from pendulab.errors import UserError
 from pendulab.outputs import run_folder
+from pendulab.spec import MAX_STEPS, POKE_DEFAULT  # noqa: F401  (POKE_DEFAULT: used by lab)
 
-POKE_DEFAULT = (50.0, 0.005, 1.0)
-#: Longest run in steps (the log is kept in memory): 2000 s at 1 kHz.
-MAX_STEPS = 2_000_000
+if TYPE_CHECKING:
+    from pendulab.spec import RunSpec
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -57,6 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def parse_poke(text: str) -> tuple[float, float, float]:
+    """``MAG,DUR,START`` as three numbers, checked by :meth:`pendulab.spec.Poke.validate`."""
+    from pendulab.spec import Poke
+
     parts = [p.strip() for p in text.split(",")]
     try:
         values = tuple(float(p) for p in parts)
@@ -64,35 +65,26 @@ def parse_poke(text: str) -> tuple[float, float, float]:
         raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1") from None
     if len(values) != 3:
         raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1")
-    magnitude, duration, start = values
-    if not all(math.isfinite(v) for v in values) or duration < 0 or start < 0:
-        raise UserError(f"--poke {text!r}: the magnitude must be finite and the duration and start >= 0")
-    return magnitude, duration, start
+    Poke(*values).validate()
+    return values  # type: ignore[return-value]
 
 
 def check_run_settings(stop_time: float, step: float, delay: int) -> None:
     """Refuse a stop time, control period or transport delay the simulation cannot take (UserError)."""
-    if not (stop_time > 0 and math.isfinite(stop_time)):
-        raise UserError(f"--stop-time {stop_time} must be a positive number of seconds")
-    if not (0 < step <= 0.1):
-        raise UserError(f"--step {step} must be within (0, 0.1] s; the lab runs at 0.001")
-    if stop_time / step > MAX_STEPS:
-        # The log is held in memory (9 signals per step): refuse before allocating it.
-        raise UserError(
-            f"--stop-time {stop_time:g} s at --step {step:g} s is {stop_time / step:.3g} steps; "
-            f"a run has at most {MAX_STEPS:,}: shorten the run or lengthen the step"
-        )
-    from pendulab.hil.protocol import MAX_DELAY
+    from pendulab.spec import Timing
 
-    if not 0 <= delay <= MAX_DELAY:
-        raise UserError(f"--delay {delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
+    Timing(stop_time=stop_time, step=step, delay=delay).validate()
 
 
-def run(args: argparse.Namespace) -> int:
-    started = time.perf_counter()
-    check_run_settings(args.stop_time, args.step, args.delay)
+def spec_from_args(args: argparse.Namespace) -> RunSpec:
+    """The run the options describe (asking on a terminal when no controller is given), validated."""
+    from pendulab.spec import Plant, Poke, Quantization, RunSpec, Timing
+
+    timing = Timing(stop_time=args.stop_time, step=args.step, method=args.method, delay=args.delay)
+    timing.validate()
     poke = parse_poke(args.poke) if args.poke else None
     controller = controller_from_args(args)
+    pendulum, calibration = args.pendulum, args.calibration
     if controller is None:
         if not sys.stdin.isatty():
             raise UserError("no controller given: use --demo, --zeros/--poles/--gain, --pid or --controller FILE (or run on a terminal to be asked)")
@@ -100,53 +92,47 @@ def run(args: argparse.Namespace) -> int:
 
         answers = prompt_simulation()
         controller = answers.controller
-        args.pendulum = answers.pendulum
-        args.calibration = answers.calibration or args.calibration
+        pendulum = answers.pendulum
+        calibration = answers.calibration or calibration
         poke = poke or answers.poke
-    params = plant_parameters_from_args(args)
-    poke = poke or POKE_DEFAULT
-    if poke[2] >= args.stop_time:
-        # Checked before simulating: the metrics are measured from the poke on.
-        raise UserError(f"the poke starts at t={poke[2]:g} s, not before the stop time {args.stop_time:g} s; start the poke earlier or lengthen --stop-time")
-    params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
-    if args.no_quantization:
-        params = params.with_values(q_alpha=0.0, q_x=0.0)
-    folder = run_folder(args.out, args.pendulum, overwrite=args.overwrite)
+    spec = RunSpec(
+        controller,
+        plant=Plant(pendulum=pendulum, cart=args.cart, calibration=str(calibration) if calibration else None),
+        poke=Poke(*(poke or POKE_DEFAULT)),
+        timing=timing,
+        quantization=Quantization(enabled=not args.no_quantization),
+    )
+    return spec.validate()
+
+
+def run(args: argparse.Namespace) -> int:
+    started = time.perf_counter()
+    spec = spec_from_args(args)
+    params = spec.parameters()
+    folder = run_folder(args.out, spec.plant.pendulum, overwrite=args.overwrite)
     out_dir = folder.path
 
-    from pendulab.analysis.results import write_results
-    from pendulab.cosim.pendulum import simulate_poke
+    from pendulab.cosim.master import SimulationError
+    from pendulab.simulation import simulate
 
     def progress(t: float) -> None:
         if sys.stderr.isatty():
-            print(f"\r  simulated {t:5.1f} / {args.stop_time:g} s", end="", file=sys.stderr, flush=True)
-
-    from pendulab.cosim.master import SimulationError
+            print(f"\r  simulated {t:5.1f} / {spec.timing.stop_time:g} s", end="", file=sys.stderr, flush=True)
 
     try:
-        result = simulate_poke(
-            controller,
-            params,
-            stop_time=args.stop_time,
-            step=args.step,
-            method=args.method,
-            meta={"pendulum": args.pendulum, "cart": args.cart, "calibration": args.calibration or "default"},
-            progress=progress,
-            delay=args.delay,
-        )
+        result = simulate(spec, progress=progress)
     except SimulationError as exc:
         # An FMU refused the inputs (e.g. a poke so large that the state overflows): nothing is written.
         raise UserError(f"the simulation failed: {exc}; check the controller, the poke and the parameters") from None
     if sys.stderr.isatty():
         print("\r" + " " * 40 + "\r", end="", file=sys.stderr)
     folder.prepare()
-    paths = write_results(out_dir, result.columns, result.meta, result.metrics)
-    written = [Path(p) for p in (paths.values() if isinstance(paths, dict) else paths)]
+    written = list(result.write(out_dir).values())
     if args.plot:
         from pendulab.analysis.plots import plot_run
 
         written += plot_run(
-            result.columns, out_dir, title=f"{args.pendulum} pendulum: {result.meta['controller']}", poke_start=params.poke_start,
+            result.columns, out_dir, title=f"{spec.plant.pendulum} pendulum: {result.meta['controller']}", poke_start=params.poke_start,
             safety_cut_time=result.metrics.get("safety_cut_time_s"), voltage_limit=params.V_max,
         )
     if args.animate:
@@ -158,9 +144,10 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.cosim.pendulum import pendulum_system
         from pendulab.cosim.ssp import export_ssp
 
-        system = pendulum_system(params, discretize(controller, h=args.step, method=args.method).to_parameters(), step=args.step,
-                                 delay=args.delay, plant=args.ssp)
-        written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=args.stop_time))
+        timing = spec.timing
+        system = pendulum_system(params, discretize(spec.controller.transfer_function, h=timing.step, method=timing.method).to_parameters(),
+                                 step=timing.step, delay=timing.delay, plant=args.ssp)
+        written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=timing.stop_time))
     _print_summary(result, out_dir, written, time.perf_counter() - started)
     return 0
 

@@ -11,18 +11,17 @@ True
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from pendulab import __version__
-from pendulab.cosim.master import Event, Master
+from pendulab.cosim.master import Event
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
 from pendulab.fmu.build import ensure_fmu
 from pendulab.model.parameters import PlantParameters
+from pendulab.simulation import SimulationResult
 
 #: The loop's wiring, by variable name (SPEC §7): the measured angle feeds controller and supervisor,
 #: the supervisor owns the motor voltage.
@@ -97,15 +96,6 @@ def pendulum_system(
     return system
 
 
-@dataclass
-class SimulationResult:
-    """Columns of a run (SPEC §7 names), its metrics and its metadata."""
-
-    columns: dict[str, np.ndarray]
-    metrics: dict[str, Any]
-    meta: dict[str, Any] = field(default_factory=dict)
-
-
 def simulate_poke(
     controller: Any,
     params: PlantParameters | None = None,
@@ -120,7 +110,7 @@ def simulate_poke(
     progress: Callable[[float], None] | None = None,
     delay: int = 0,
 ) -> SimulationResult:
-    """Simulate the loop with a poke and measure the response.
+    """Simulate the loop with a poke: :func:`pendulab.simulate` of the spec these arguments describe.
 
     Parameters
     ----------
@@ -131,33 +121,17 @@ def simulate_poke(
     delay : int, optional
         Transport delay of N control periods before the plant's voltage input, as on the rig.
     """
-    from pendulab.analysis.metrics import compute_metrics
-    from pendulab.control.realization import discretize
+    from pendulab.simulation import simulate
+    from pendulab.spec import RunSpec, Supervisor, Timing
 
-    params = params or PlantParameters.preset()
-    lti = discretize(controller, h=step, method=method)
-    system = pendulum_system(params, lti.to_parameters(), step=step, supervisor=supervisor, fmu_dir=fmu_dir, delay=delay)
-    with Master(system) as master:
-        log = master.run(stop_time, list(RECORDED), events=events, progress=progress)
-    columns = collect_columns(log, params)
-    metrics = compute_metrics(
-        columns["t"],
-        columns["alpha"],
-        poke_start=params.poke_start,
-        q_alpha=params.q_alpha,
-        xdot=columns["xdot"],
-        safety_cut_time=columns.pop("_safety_cut_time"),
-    )
-    info = {
-        "controller": describe_controller(controller),
-        "discretization": method,
-        "step": step,
-        "delay": delay,
-        "parameters": params.as_dict(),
-        "version": __version__,
-        **dict(meta or {}),
-    }
-    return SimulationResult(columns, metrics, info)
+    spec = RunSpec.for_parameters(controller, params or PlantParameters.preset(),
+                                  timing=Timing(stop_time=stop_time, step=step, method=method, delay=delay),
+                                  supervisor=Supervisor(**dict(supervisor or {})))
+    result = simulate(spec, progress=progress, events=events, fmu_dir=fmu_dir)
+    for key in ("pendulum", "cart", "calibration"):  # not known from the parameters alone
+        result.meta.pop(key)
+    result.meta.update(meta or {})
+    return result
 
 
 def collect_columns(log: Mapping[str, np.ndarray], params: PlantParameters) -> dict[str, np.ndarray]:

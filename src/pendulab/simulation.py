@@ -1,0 +1,161 @@
+"""The one way to simulate a run: :func:`simulate` a :class:`~pendulab.spec.RunSpec`.
+
+Examples
+--------
+>>> import tempfile
+>>> import pendulab
+>>> from pendulab.control import demo_controller
+>>> spec = pendulab.RunSpec(demo_controller("long"), timing=pendulab.Timing(stop_time=2.0))
+>>> result = pendulab.simulate(spec)
+>>> result.metrics["stable"], len(result.columns["t"])
+(True, 2001)
+>>> sorted(result.write(tempfile.mkdtemp()))
+['csv', 'mat', 'metrics']
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from pendulab.spec import RunSpec
+
+
+@dataclass
+class SimulationResult:
+    """Columns of a run (SPEC §7 names), its metrics and its metadata.
+
+    Attributes
+    ----------
+    columns : dict of str to ndarray
+        ``t``, ``x``, ``xdot``, ``alpha``, ``alpha_measured``, ``tip``, ``voltage_command``, ``voltage``,
+        ``supervisor_state`` (and any signals recorded on request, under their full names).
+    metrics : dict
+        What ``metrics.json`` holds (:func:`pendulab.analysis.metrics.compute_metrics`).
+    meta : dict
+        What the ``meta`` struct of ``run.mat`` holds.
+    spec : RunSpec or None
+        The run's description.
+    """
+
+    columns: dict[str, np.ndarray]
+    metrics: dict[str, Any]
+    meta: dict[str, Any] = field(default_factory=dict)
+    spec: RunSpec | None = None
+
+    def write(self, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
+        """Write ``run.mat``, ``run.csv`` and ``metrics.json`` into ``out_dir``; returns their paths by kind."""
+        from pendulab.analysis.results import write_results
+
+        return write_results(out_dir, self.columns, self.meta, self.metrics)
+
+
+def simulate(
+    spec: RunSpec,
+    *,
+    progress: Callable[[float], None] | None = None,
+    events: Sequence[Any] = (),
+    record: Sequence[str] = (),
+    meta: Mapping[str, Any] | None = None,
+    fmu_dir: str | os.PathLike[str] | None = None,
+) -> SimulationResult:
+    """Simulate the lab's loop (plant, controller, supervisor FMUs) as ``spec`` describes, and measure the poke.
+
+    Parameters
+    ----------
+    spec : RunSpec
+        The run; it is validated first (a broken rule raises :class:`~pendulab.errors.UserError`).
+    progress : callable, optional
+        Called with the simulated time now and then.
+    events : sequence of pendulab.cosim.master.Event, optional
+        Inputs set at given times (e.g. supervisor commands).
+    record : sequence of str, optional
+        Extra signals (``"controller.xdot_estimate"``) returned in ``columns`` under their full names.
+    meta : mapping, optional
+        Entries added to the result's ``meta`` (e.g. a calibration's label).
+    fmu_dir : path, optional
+        Folder of the Plant, Controller and Supervisor FMUs (default: the package's, built if missing).
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    pendulab.errors.UserError
+        The spec breaks a rule.
+    pendulab.cosim.master.SimulationError
+        An FMU refused a step (e.g. a poke so large that the state overflows).
+    """
+    from pendulab import __version__
+    from pendulab.analysis.metrics import compute_metrics
+    from pendulab.cosim.master import Master, SimulationError
+    from pendulab.cosim.pendulum import RECORDED, collect_columns, pendulum_system
+
+    spec.validate()
+    params = spec.parameters()
+    timing = spec.timing
+    fmu_dir = Path(fmu_dir) if fmu_dir is not None else None
+    block = spec.controller.fmu
+    if block is None:
+        from pendulab.control.realization import discretize
+
+        lti = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method)
+        system = pendulum_system(params, lti.to_parameters(), step=timing.step, supervisor=spec.supervisor_parameters(),
+                                 fmu_dir=fmu_dir, delay=timing.delay)
+    else:
+        from pendulab.blocks.loop import block_controller_system
+
+        system = block_controller_system(block, params, step=timing.step, supervisor=spec.supervisor_parameters(),
+                                         controller_parameters=dict(spec.controller.parameters), fmu_dir=fmu_dir,
+                                         delay=timing.delay)
+    with Master(system) as master:
+        try:
+            log = master.run(timing.stop_time, [*RECORDED, *record], events=tuple(events), progress=progress)
+        except SimulationError as exc:
+            if block is not None:
+                from pendulab.blocks.base import block_error
+
+                detail = block_error("controller")
+                if detail:
+                    raise SimulationError(f"{exc}: {detail}") from exc
+            raise
+    columns = collect_columns(log, params)
+    safety_cut = columns.pop("_safety_cut_time")
+    metrics = compute_metrics(
+        columns["t"], columns["alpha"], poke_start=params.poke_start, q_alpha=params.q_alpha,
+        xdot=columns["xdot"], safety_cut_time=safety_cut,
+    )
+    for name in record:
+        columns[name] = np.asarray(log[name])
+    info = _meta(spec, params, safety_cut, __version__)
+    info.update(meta or {})
+    return SimulationResult(columns, metrics, info, spec)
+
+
+def _meta(spec: RunSpec, params: Any, safety_cut: float | None, version: str) -> dict[str, Any]:
+    """The ``meta`` struct of the run's files."""
+    if spec.controller.fmu is not None:
+        return {
+            "controller": spec.describe_controller(),
+            "step": spec.timing.step,
+            "parameters": params.as_dict(),
+            "version": version,
+            "safety_cut_time": safety_cut,
+            "pendulum": spec.plant.pendulum,
+        }
+    return {
+        "controller": spec.describe_controller(),
+        "discretization": spec.timing.method,
+        "step": spec.timing.step,
+        "delay": spec.timing.delay,
+        "parameters": params.as_dict(),
+        "version": version,
+        "pendulum": spec.plant.pendulum,
+        "cart": spec.plant.cart,
+        "calibration": spec.plant.calibration or "default",
+    }

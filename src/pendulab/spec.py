@@ -1,0 +1,506 @@
+"""One description of a run: :class:`RunSpec`, typed, immutable, validated, serializable.
+
+A run is the plant (and its preset and calibration), the controller, the poke, the timing
+(stop time, control period, discretization, transport delay), the encoders' quantization and the
+supervisor's settings. The command line, the GUI, ``lab``, the firmware twin and scripts all build a
+``RunSpec`` and hand it to :func:`pendulab.simulate`; the run's files carry its serialization.
+
+Every section is a frozen dataclass whose fields have defaults, so a new field (with a default) is
+read from older files unchanged and :meth:`RunSpec.from_dict` refuses unknown keys by name. The
+rules (and the messages the command line prints) live once, in :meth:`RunSpec.validate`.
+
+Examples
+--------
+>>> from pendulab.spec import RunSpec, Poke, Timing
+>>> from pendulab.control import demo_controller
+>>> spec = RunSpec(demo_controller(), poke=Poke(magnitude=220.0), timing=Timing(stop_time=3.0))
+>>> spec.validate() is spec
+True
+>>> spec.timing.stop_time, spec.poke.start
+(3.0, 1.0)
+>>> RunSpec.from_json(spec.to_json()) == spec
+True
+>>> spec.replace(timing=Timing(stop_time=0.5)).validate()
+Traceback (most recent call last):
+    ...
+pendulab.errors.UserError: the poke starts at t=1 s, not before the stop time 0.5 s; start the poke earlier or lengthen --stop-time
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import sys
+import types
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Mapping
+
+from pendulab.errors import UserError
+
+#: Plants a run can name (``plant.kind``).
+PLANT_KINDS = ("pendulum",)
+#: Discretizations of the controller (``timing.method``).
+METHODS = ("tustin", "zoh")
+#: The poke of a run that names none: 50 rad/s^2 for 5 ms from t = 1 s (SPEC §2).
+POKE_DEFAULT = (50.0, 0.005, 1.0)
+#: Longest run in steps (the log is kept in memory): 2000 s at 1 kHz.
+MAX_STEPS = 2_000_000
+#: The control period's largest value (s).
+MAX_STEP = 0.1
+
+
+def _frozen_mapping(value: Any, where: str) -> Mapping[str, Any]:
+    if value is None:
+        value = {}
+    if not isinstance(value, Mapping):
+        raise UserError(f"{where} must be a table of names and values, got {type(value).__name__}")
+    return types.MappingProxyType(dict(value))
+
+
+def _choice(*choices: str, default: str) -> Any:
+    return field(default=default, metadata={"choices": choices})
+
+
+def _mapping_field() -> Any:
+    # Mappings are held read-only and left out of the hash (a spec stays hashable).
+    return field(default_factory=lambda: types.MappingProxyType({}), hash=False, metadata={"mapping": True})
+
+
+# ------------------------------------------------------------------------------------------ sections
+@dataclass(frozen=True)
+class Plant:
+    """The plant: which one, its preset, calibration and parameter overrides.
+
+    Parameters
+    ----------
+    kind : {"pendulum"}
+        The plant model (the cart-pendulum; other plants add their name to :data:`PLANT_KINDS`).
+    pendulum : {"long", "short", "none"}
+        Pendulum preset (24 in, 12 in, or none).
+    cart : {"ip02", "ip02-weight", "ip01"}
+        Cart preset.
+    calibration : str, optional
+        Calibration file (JSON or the old lab's ``.mat``); ``None``: the lab's measured table.
+    overrides : mapping of str to float
+        Plant parameters by name (:class:`~pendulab.model.parameters.PlantParameters`), applied after
+        the preset and the calibration.
+    """
+
+    kind: str = _choice(*PLANT_KINDS, default="pendulum")
+    pendulum: str = "long"
+    cart: str = "ip02"
+    calibration: str | None = None
+    overrides: Mapping[str, float] = _mapping_field()
+
+    def validate(self) -> None:
+        """Nothing to check alone: :meth:`RunSpec.validate` checks the preset, calibration and controller."""
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """The controller: the student's ``G(s)`` or a controller block FMU.
+
+    Parameters
+    ----------
+    transfer_function : Controller, optional
+        Kernel and compensators (:class:`pendulab.control.Controller`), discretized at the control
+        period.
+    fmu : str, optional
+        A controller block FMU (e.g. built with :func:`pendulab.blocks.build_block`) instead.
+    parameters : mapping
+        Start values of the block FMU's parameters.
+    label : str, optional
+        How the run's files name the controller (default: ``G(s)`` written out, or the block's name).
+    """
+
+    transfer_function: Any = None
+    fmu: str | None = None
+    parameters: Mapping[str, float] = _mapping_field()
+    label: str | None = None
+
+    def validate(self) -> None:
+        """Nothing to check alone: :meth:`RunSpec.validate` checks the preset, calibration and controller."""
+
+
+@dataclass(frozen=True)
+class Poke:
+    """A rectangular pulse added to the pendulum's angular acceleration (SPEC §2)."""
+
+    magnitude: float = POKE_DEFAULT[0]
+    duration: float = POKE_DEFAULT[1]
+    start: float = POKE_DEFAULT[2]
+
+    def validate(self) -> None:
+        """Check this section's own rules (UserError with the command line's message)."""
+        values = (self.magnitude, self.duration, self.start)
+        if not all(math.isfinite(v) for v in values) or self.duration < 0 or self.start < 0:
+            raise UserError(f"--poke {','.join(f'{v:g}' for v in values)}: the magnitude must be finite and the duration and start >= 0")
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Stop time (s), control period ``step`` (s), discretization and transport delay (periods)."""
+
+    stop_time: float = 5.0
+    step: float = 1e-3
+    method: str = _choice(*METHODS, default="tustin")
+    delay: int = 0
+
+    def validate(self) -> None:
+        """Check this section's own rules (UserError with the command line's message)."""
+        if not (isinstance(self.stop_time, (int, float)) and self.stop_time > 0 and math.isfinite(self.stop_time)):
+            raise UserError(f"--stop-time {self.stop_time} must be a positive number of seconds")
+        if not (0 < self.step <= MAX_STEP):
+            raise UserError(f"--step {self.step} must be within (0, {MAX_STEP:g}] s; the lab runs at 0.001")
+        if self.stop_time / self.step > MAX_STEPS:
+            # The log is held in memory (9 signals per step): refuse before allocating it.
+            raise UserError(
+                f"--stop-time {self.stop_time:g} s at --step {self.step:g} s is {self.stop_time / self.step:.3g} steps; "
+                f"a run has at most {MAX_STEPS:,}: shorten the run or lengthen the step"
+            )
+        from pendulab.hil.protocol import MAX_DELAY
+
+        if isinstance(self.delay, bool) or not isinstance(self.delay, int) or not 0 <= self.delay <= MAX_DELAY:
+            raise UserError(f"--delay {self.delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
+
+
+@dataclass(frozen=True)
+class Quantization:
+    """The encoders: quantized (default) or ideal; steps override the preset's ``q_alpha``/``q_x``."""
+
+    enabled: bool = True
+    q_alpha: float | None = None
+    q_x: float | None = None
+
+    def validate(self) -> None:
+        """Check this section's own rules (UserError with the command line's message)."""
+        for name in ("q_alpha", "q_x"):
+            step = getattr(self, name)
+            if step is not None and not (math.isfinite(step) and step >= 0):
+                raise UserError(f"quantization.{name} {step} must be a step >= 0 (0: ideal encoder)")
+
+
+@dataclass(frozen=True)
+class Supervisor:
+    """The safety supervisor's settings; ``None`` keeps the Supervisor FMU's default.
+
+    Parameters
+    ----------
+    alpha_max : float, optional
+        Angle limit in rad (10 to 15 degrees; default 15 degrees).
+    x_max : float, optional
+        Track limit in m (default 0.40).
+    """
+
+    alpha_max: float | None = None
+    x_max: float | None = None
+
+    def validate(self) -> None:
+        """Check this section's own rules (UserError with the command line's message)."""
+        if self.alpha_max is not None:
+            from pendulab.fmu.models.supervisor.config import ALPHA_MAX_RANGE_DEG, ALPHA_MAX_SLACK
+
+            lo, hi = (math.radians(d) for d in ALPHA_MAX_RANGE_DEG)
+            if not lo - ALPHA_MAX_SLACK <= self.alpha_max <= hi + ALPHA_MAX_SLACK:
+                raise UserError(f"supervisor.alpha_max {self.alpha_max:g} rad must be {ALPHA_MAX_RANGE_DEG[0]:g} to {ALPHA_MAX_RANGE_DEG[1]:g} degrees")
+        if self.x_max is not None and not (math.isfinite(self.x_max) and self.x_max > 0):
+            raise UserError(f"supervisor.x_max {self.x_max} must be a positive distance in m")
+
+
+#: The sections of a RunSpec, by field name.
+SECTIONS: dict[str, type] = {
+    "plant": Plant,
+    "controller": ControllerSpec,
+    "poke": Poke,
+    "timing": Timing,
+    "quantization": Quantization,
+    "supervisor": Supervisor,
+}
+
+
+# ------------------------------------------------------------------------------------------ the spec
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything one simulated run needs; build it, :meth:`validate` it, :func:`pendulab.simulate` it.
+
+    Parameters
+    ----------
+    controller : ControllerSpec, Controller or control.TransferFunction
+        A controller is wrapped into a :class:`ControllerSpec`.
+    plant, poke, timing, quantization, supervisor
+        The sections (see their classes); each defaults to the lab's defaults.
+
+    Examples
+    --------
+    >>> from pendulab.control import Controller
+    >>> spec = RunSpec(Controller.pid(40, 5, 4), plant=Plant(pendulum="short"))
+    >>> spec.to_dict()["plant"]
+    {'kind': 'pendulum', 'pendulum': 'short', 'cart': 'ip02', 'calibration': None, 'overrides': {}}
+    >>> spec.parameters().Lp
+    0.3365
+    """
+
+    controller: ControllerSpec = field(default_factory=ControllerSpec)
+    plant: Plant = field(default_factory=Plant)
+    poke: Poke = field(default_factory=Poke)
+    timing: Timing = field(default_factory=Timing)
+    quantization: Quantization = field(default_factory=Quantization)
+    supervisor: Supervisor = field(default_factory=Supervisor)
+
+    def __post_init__(self) -> None:
+        controller = self.controller
+        if not isinstance(controller, ControllerSpec):
+            controller = ControllerSpec(transfer_function=_as_controller(controller))
+        elif controller.transfer_function is not None:
+            controller = dataclasses.replace(controller, transfer_function=_as_controller(controller.transfer_function))
+        object.__setattr__(self, "controller", controller)
+        for name, cls in SECTIONS.items():
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise UserError(f"RunSpec {name} must be a {cls.__name__}, got {type(value).__name__}")
+            for f in fields(value):
+                if f.metadata.get("mapping"):
+                    object.__setattr__(value, f.name, _frozen_mapping(getattr(value, f.name), f"{name}.{f.name}"))
+
+    # ------------------------------------------------------------------ checks
+    def validate(self) -> "RunSpec":
+        """Check every rule of a run; the first broken one raises :class:`~pendulab.errors.UserError`.
+
+        The messages are the command line's (they name its options). Returns the spec itself.
+        """
+        for name in SECTIONS:
+            section = getattr(self, name)
+            _check_choices(section, name)
+            section.validate()
+        t = self.timing
+        p = self.poke
+        if p.start >= t.stop_time:
+            # Checked before simulating: the metrics are measured from the poke on.
+            raise UserError(
+                f"the poke starts at t={p.start:g} s, not before the stop time {t.stop_time:g} s; start the poke earlier or lengthen --stop-time"
+            )
+        c = self.controller
+        if (c.transfer_function is None) == (c.fmu is None):
+            raise UserError("a run needs one controller: a transfer function (kernel and compensators) or a controller block FMU")
+        if c.fmu is not None and not Path(c.fmu).is_file():
+            raise UserError(f"controller FMU {c.fmu} does not exist; build it with pendulab.blocks.build_block")
+        self.parameters()  # the preset, the calibration file and the overrides
+        return self
+
+    # ------------------------------------------------------------------ derived values
+    def parameters(self) -> Any:
+        """The plant's :class:`~pendulab.model.parameters.PlantParameters`.
+
+        The preset, then the calibration file, the overrides, the poke and the quantization.
+        """
+        from pendulab.model.parameters import PlantParameters
+
+        plant = self.plant
+        params = PlantParameters.preset(pendulum=plant.pendulum, cart=plant.cart)
+        if plant.calibration:
+            from pendulab.calibration.files import load_calibration
+
+            params = load_calibration(plant.calibration).apply(params)
+        if plant.overrides:
+            params = params.with_values(**plant.overrides)
+        params = params.with_values(poke_magnitude=self.poke.magnitude, poke_duration=self.poke.duration, poke_start=self.poke.start)
+        q = self.quantization
+        if not q.enabled:
+            params = params.with_values(q_alpha=0.0, q_x=0.0)
+        else:
+            steps = {k: v for k, v in (("q_alpha", q.q_alpha), ("q_x", q.q_x)) if v is not None}
+            if steps:
+                params = params.with_values(**steps)
+        return params
+
+    def supervisor_parameters(self) -> dict[str, Any]:
+        """Start values for the Supervisor FMU (only the settings given)."""
+        return {f.name: getattr(self.supervisor, f.name) for f in fields(self.supervisor) if getattr(self.supervisor, f.name) is not None}
+
+    def describe_controller(self) -> str:
+        """The controller as the run's files name it."""
+        c = self.controller
+        if c.label is not None:
+            return c.label
+        if c.fmu is not None:
+            return f"Python block {Path(c.fmu).name}"
+        describe = getattr(c.transfer_function, "describe", None)
+        return describe() if callable(describe) else str(c.transfer_function)
+
+    # ------------------------------------------------------------------ construction
+    def replace(self, **sections: Any) -> "RunSpec":
+        """A copy with whole sections replaced (``spec.replace(poke=Poke(220.0))``)."""
+        return dataclasses.replace(self, **sections)
+
+    @classmethod
+    def for_parameters(cls, controller: Any, params: Any, **sections: Any) -> "RunSpec":
+        """A spec whose plant is exactly ``params`` (a :class:`PlantParameters`), its poke included."""
+        poke = Poke(params.poke_magnitude, params.poke_duration, params.poke_start)
+        return cls(controller, plant=Plant(overrides=params.as_dict()), poke=poke, **sections)
+
+    # ------------------------------------------------------------------ serialization
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON types): one table per section; ``None`` where a setting is not given."""
+        out: dict[str, Any] = {}
+        for name in SECTIONS:
+            section = getattr(self, name)
+            table: dict[str, Any] = {}
+            for f in fields(section):
+                value = getattr(section, f.name)
+                if f.metadata.get("mapping"):
+                    value = dict(value)
+                elif name == "controller" and f.name == "transfer_function":
+                    value = value.to_dict() if value is not None else None
+                table[f.name] = value
+            out[name] = table
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Any, *, source: str = "run description") -> "RunSpec":
+        """From :meth:`to_dict`'s shape; missing keys take their defaults, unknown keys are an error."""
+        if not isinstance(data, Mapping):
+            raise UserError(f"{source} must be a table of sections ({', '.join(SECTIONS)}), got {type(data).__name__}")
+        unknown = [k for k in data if k not in SECTIONS]
+        if unknown:
+            raise UserError(f"{source}: unknown section {unknown[0]!r}; the sections are {', '.join(SECTIONS)}")
+        sections = {name: _section_from_dict(SECTIONS[name], data[name], f"{source}: {name}") for name in data}
+        return cls(**sections)
+
+    def to_json(self) -> str:
+        """JSON text of :meth:`to_dict`."""
+        return json.dumps(self.to_dict(), indent=2) + "\n"
+
+    @classmethod
+    def from_json(cls, text: str, *, source: str = "run description") -> "RunSpec":
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise UserError(f"{source} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}; fix the syntax") from None
+        return cls.from_dict(data, source=source)
+
+    def to_toml(self) -> str:
+        """TOML text of :meth:`to_dict` (settings not given are left out)."""
+        return _toml(self.to_dict())
+
+    @classmethod
+    def from_toml(cls, text: str, *, source: str = "run description") -> "RunSpec":
+        if sys.version_info >= (3, 11):
+            import tomllib
+        else:  # pragma: no cover
+            import tomli as tomllib
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise UserError(f"{source} is not valid TOML: {' '.join(str(exc).split())}; fix the syntax") from None
+        return cls.from_dict(data, source=source)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> "RunSpec":
+        """Read a run description file (``.toml`` or ``.json``)."""
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"run description {path} cannot be read ({getattr(exc, 'strerror', None) or exc}); check the path") from None
+        reader = cls.from_toml if path.suffix.lower() == ".toml" else cls.from_json
+        return reader(text, source=f"run description {path}")
+
+
+# ------------------------------------------------------------------------------------------ helpers
+def _check_choices(section: Any, name: str) -> None:
+    for f in fields(section):
+        choices = f.metadata.get("choices")
+        if choices and getattr(section, f.name) not in choices:
+            raise UserError(f"{name}.{f.name} {getattr(section, f.name)!r}: choose {' or '.join(choices)}")
+
+
+def _as_controller(value: Any) -> Any:
+    from pendulab.control.controller import Controller
+
+    if isinstance(value, Controller):
+        return value
+    if isinstance(value, Mapping):
+        return Controller.from_dict(value)
+    if hasattr(value, "num") and hasattr(value, "den"):  # control.TransferFunction
+        return Controller.from_transfer_function(value)
+    raise UserError(f"a controller is a pendulab Controller, a control.TransferFunction or a controller table, got {type(value).__name__}")
+
+
+def _type_names(annotation: str) -> tuple[set[str], bool]:
+    parts = {p.strip() for p in str(annotation).split("|")}
+    optional = "None" in parts
+    return parts - {"None"}, optional
+
+
+def _coerce(value: Any, f: dataclasses.Field, where: str) -> Any:
+    """A value read from a file, checked against the field's annotation."""
+    if f.metadata.get("mapping"):
+        return _frozen_mapping(value, where)
+    kinds, optional = _type_names(f.type)
+    if value is None:
+        if optional or "Any" in kinds:
+            return None
+        raise UserError(f"{where} must be given (no null)")
+    if "Any" in kinds:
+        return value
+    if "bool" in kinds:
+        if isinstance(value, bool):
+            return value
+        raise UserError(f"{where} must be true or false, got {value!r}")
+    if "int" in kinds:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        raise UserError(f"{where} must be a whole number, got {value!r}")
+    if "float" in kinds:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise UserError(f"{where} must be a number, got {value!r}")
+    if "str" in kinds:
+        if isinstance(value, str):
+            return value
+        raise UserError(f"{where} must be text, got {value!r}")
+    return value
+
+
+def _section_from_dict(cls: type, data: Any, where: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise UserError(f"{where} must be a table, got {type(data).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = [k for k in data if k not in known]
+    if unknown:
+        raise UserError(f"{where}: unknown key {unknown[0]!r}; known keys are {', '.join(known)}")
+    values = {name: _coerce(value, known[name], f"{where}.{name}") for name, value in data.items()}
+    return cls(**values)
+
+
+def _toml_scalar(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_scalar(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{json.dumps(str(k))} = {_toml_scalar(v)}" for k, v in value.items() if v is not None) + "}"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def _toml(data: Mapping[str, Any]) -> str:
+    lines: list[str] = []
+    for name, table in data.items():
+        lines.append(f"[{name}]")
+        for key, value in table.items():
+            if value is not None:
+                lines.append(f"{key} = {_toml_scalar(value)}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+__all__ = ["ControllerSpec", "Plant", "Poke", "Quantization", "RunSpec", "Supervisor", "Timing", "POKE_DEFAULT", "MAX_STEPS"]
