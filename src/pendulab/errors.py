@@ -34,4 +34,4 @@ class FitRejected(CalibrationError):
 
 
 class FmuBuildError(RuntimeError):
-    """Building an FMU failed (no C compiler, compiler error)."""
+    """Building native code (an FMU, a compiled helper) failed: no C compiler, or a compiler error."""

@@ -16,63 +16,24 @@ Gauss-Newton Hessian ``J^T J`` of one iteration share one Jacobian evaluation.
 from __future__ import annotations
 
 import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
-from pathlib import Path
 from typing import Sequence
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from pendulab.native import shared_library
 
-
-def cache_dir() -> Path:
-    """Where compiled fit functions are kept (``$PENDULAB_CACHE`` or ``~/.cache/pendulab``)."""
-    root = os.environ.get("PENDULAB_CACHE") or os.path.join(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache", "pendulab")
-    return Path(root) / "fit"
 
 
 def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1", flags: Sequence[str] = ()) -> tuple[str | None, bool]:
-    """Shared library holding ``functions`` (built once, cached) and whether it was built just now.
-
-    ``(None, False)`` without a working compiler.
-    """
-    compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if not compiler:
-        return None, False
-    with tempfile.TemporaryDirectory(prefix="pendulab-fit-") as tmp:
-        gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-        for f in functions:
-            gen.add(f)
-        gen.generate(tmp + "/")
-        source = Path(tmp, f"{name}.c").read_bytes()
-        digest = hashlib.sha256(source + ca.__version__.encode() + " ".join([optimize, *flags]).encode()).hexdigest()[:16]
-        target = cache_dir() / f"{name}_{digest}.so"
-        if target.is_file():
-            return str(target), False
-        partial = Path(tmp, target.name)
-        command = [compiler, optimize, *flags, "-shared", "-fPIC", "-fno-math-errno", str(Path(tmp, f"{name}.c")), "-o", str(partial), "-lm"]
-        try:
-            result = subprocess.run(command, capture_output=True, text=True, timeout=600)
-        except (OSError, subprocess.TimeoutExpired):
-            return None, False
-        if result.returncode != 0:
-            return None, False
-        # Another process may build the same file: rename is atomic, the last one wins.
-        try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            fd, staged = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".part")
-            os.close(fd)
-            shutil.copyfile(partial, staged)
-            os.replace(staged, target)
-        except OSError:  # no writable cache: keep this process's copy in a folder that outlives it
-            keep = Path(tempfile.mkdtemp(prefix="pendulab-fit-"))
-            shutil.copyfile(partial, keep / target.name)
-            return str(keep / target.name), True
-        return str(target), True
+    """Shared library holding ``functions`` (built once, cached by :func:`pendulab.native.shared_library`)
+    and whether it was built just now; ``(None, False)`` without a working compiler."""
+    gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for f in functions:
+        gen.add(f)
+    library = shared_library(gen.dump(), name, flags=(optimize, *flags), salt=ca.__version__, kind="fit", prebuilt=False)
+    return (str(library.path), library.built) if library else (None, False)
 
 
 class IntervalFunctions:

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+from pathlib import Path
 from typing import Sequence
 
 from pendulab import __version__
@@ -38,7 +40,24 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue
         module.register(subparsers)
+    for name, sub in subparsers.choices.items():
+        if name in FMU_COMMANDS:
+            sub.add_argument("--fmus", metavar="DIR", help="use the FMUs in DIR instead of the installed ones (e.g. your own Controller.fmu)")
     return parser
+
+
+#: Subcommands that load FMUs, and so take ``--fmus DIR``.
+FMU_COMMANDS = frozenset({"simulate", "calibrate", "lab", "rig-emulator", "compare", "gui", "sweep", "lqr"})
+
+
+def _use_fmu_dir(folder: str | None) -> None:
+    """``--fmus DIR``: every FMU found there replaces the installed one, here and in worker processes."""
+    if folder is None:
+        return
+    path = Path(folder).expanduser()
+    if not path.is_dir():
+        raise UserError(f"--fmus {folder}: no such folder; give the folder that holds your .fmu files")
+    os.environ["PENDULAB_FMU_DIR"] = str(path.resolve())
 
 
 #: Options whose values often start with a minus sign ("--zeros -3,-6"): argparse would take such a
@@ -69,6 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raw = list(sys.argv[1:] if argv is None else argv)
         args = parser.parse_args(_join_signed_values(raw))
         args.raw_argv = raw  # for subcommands that hand their options on to another program
+        _use_fmu_dir(getattr(args, "fmus", None))
         if not getattr(args, "func", None):
             parser.print_help()
             return 2

@@ -379,19 +379,27 @@ _OP_ACCESS, _OP_COPY_F64, _OP_COPY_I32, _OP_BARRIER, _OP_STEP = range(5)
 _RUNNER: list[Any] = []
 
 
+#: The plan runner's source, and its compiler flags (part of the library's name: the wheel's prebuilt
+#: runner is found by them).
+PLAN_RUNNER_SOURCE = Path(__file__).parent / "c" / "plan_runner.c"
+PLAN_RUNNER_FLAGS = ("-O2", "-std=c99")
+
+
 def _native_runner() -> Any | None:
-    """The compiled plan runner, built on first use; None where no C compiler is available."""
+    """The compiled plan runner (prebuilt in a wheel, else compiled on first use); None without one."""
     if not _RUNNER:
-        from pendulab.fmu.build import build_helper_library
+        from pendulab.native import shared_library
 
         try:
-            lib = ctypes.CDLL(str(build_helper_library(Path(__file__).parent / "c" / "plan_runner.c")))
-            f = lib.pendulab_run_plan
+            library = shared_library(PLAN_RUNNER_SOURCE, flags=PLAN_RUNNER_FLAGS)
+            if library is None:
+                raise OSError("no C compiler and no prebuilt plan runner")
+            f = ctypes.CDLL(str(library.path)).pendulab_run_plan
             f.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_double, ctypes.c_double,
                           ctypes.POINTER(ctypes.c_long)]
             f.restype = ctypes.c_long
             _RUNNER.append(f)
-        except Exception:  # noqa: BLE001 - no compiler: the Python loop runs the same plan
+        except (OSError, AttributeError):  # the Python loop runs the same plan, slower
             _RUNNER.append(None)
     return _RUNNER[0]
 

@@ -30,12 +30,12 @@ import fmpy
 from pendulab.errors import FmuBuildError
 from pendulab.fmu.description import ModelSpec, model_description_xml, variables_header
 from pendulab.fmu.models import ALL_FMUS, FMI3_MODELS, MODELS
+from pendulab.native import PREBUILT_DIR, WIN64_COMPILER, compile_shared, cache_dir, compiler_needed, find_compiler, library_suffix
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 WRAPPER_DIR = Path(__file__).resolve().parent / "c"
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 FMI_HEADERS = Path(fmpy.__file__).resolve().parent / "c-code"
-WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
 _STAMP = "pendulab-build "
 #: The wrapper of each FMI version, and its binaries' platform folders (native Linux, win64).
 WRAPPERS = {2: "fmi2_wrapper.c", 3: "fmi3_wrapper.c"}
@@ -46,16 +46,26 @@ PLATFORM_DIRS = {2: {"Linux": "linux64", "Darwin": "darwin64", "Windows": "win64
                  3: {"Linux": "x86_64-linux", "Darwin": "x86_64-darwin", "Windows": "x86_64-windows"}}
 
 
+#: The FMUs the wheel carries, prebuilt (linux64 and win64 binaries, with their sources).
+PREBUILT_FMUS = PREBUILT_DIR / "fmus"
+
+
+def checkout_dir() -> Path | None:
+    """The repository root when pendulab runs from a checkout (an editable install), else None."""
+    repo = PACKAGE_DIR.parents[1]
+    return repo if (repo / "build_fmus.py").is_file() else None
+
+
 def default_fmu_dir() -> Path:
-    """``fmus/`` at the repository root when run from a checkout, else a per-user cache folder."""
+    """Where FMUs are built: ``$PENDULAB_FMU_DIR`` (``--fmus DIR``), else ``fmus/`` at the root of a
+    checkout, else a per-user cache folder."""
     override = os.environ.get("PENDULAB_FMU_DIR")
     if override:
         return Path(override)
-    repo = PACKAGE_DIR.parents[1]
-    if (repo / "build_fmus.py").is_file():
+    repo = checkout_dir()
+    if repo is not None:
         return repo / "fmus"
-    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    return cache / "pendulab" / "fmus"
+    return cache_dir("fmus")
 
 
 def source_hash() -> str:
@@ -92,19 +102,12 @@ def platform_dir(fmi_version: int = 2, system: str | None = None) -> str:
 
 
 def _compile(compiler: str, sources: list[Path], include_dirs: list[Path], output: Path, windows: bool) -> None:
-    flags = ["-shared", "-O2", "-std=c99", "-fno-math-errno"]
-    if not windows:
-        flags.append("-fPIC")
-        if any(s.name in WRAPPERS.values() for s in sources):
-            # An FMU exports only the FMI API (marked by fmi2Functions.h / fmi3Functions.h). Hidden internals are also called
-            # directly instead of through the PLT, and can be inlined: the plant's step is ~30 % faster.
-            flags.append("-fvisibility=hidden")
-    else:
-        flags.append("-static-libgcc")
-    command = [compiler, *flags, *(f"-I{d}" for d in include_dirs), *map(str, sources), "-o", str(output), "-lm"]
-    result = subprocess.run(command, capture_output=True, text=True)
-    if result.returncode != 0:
-        raise FmuBuildError(f"compiling {output.name} failed:\n{' '.join(command)}\n{result.stderr}")
+    flags = ["-O2", "-std=c99"]
+    if not windows and any(s.name in WRAPPERS.values() for s in sources):
+        # An FMU exports only the FMI API (marked by fmi2Functions.h / fmi3Functions.h). Hidden internals are also called
+        # directly instead of through the PLT, and can be inlined: the plant's step is ~30 % faster.
+        flags.append("-fvisibility=hidden")
+    compile_shared(compiler, sources, output, include_dirs=include_dirs, flags=flags, windows=windows)
 
 
 def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = True) -> Path:
@@ -121,9 +124,9 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
     """
     out_dir = Path(out_dir or default_fmu_dir())
     out_dir.mkdir(parents=True, exist_ok=True)
-    compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    compiler = find_compiler()
     if not compiler:
-        raise FmuBuildError("no C compiler found: install gcc (e.g. 'apt-get install gcc') to build the FMUs")
+        raise compiler_needed(f"building {name}.fmu from source")
     spec = model_spec(name)
     wrapper = WRAPPERS[spec.fmi_version]
     with tempfile.TemporaryDirectory(prefix=f"pendulab-{name}-") as tmp:
@@ -143,7 +146,7 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
         (sources_dir / "buildDescription.xml").write_text(_build_description(spec.identifier, c_files))
 
         binaries = root / "binaries"
-        suffix = {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}[platform.system()]
+        suffix = library_suffix()
         native = binaries / platform_dir(spec.fmi_version) / f"{spec.identifier}{suffix}"
         native.parent.mkdir(parents=True)
         sources = [sources_dir / f for f in c_files]
@@ -163,26 +166,6 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
             zf.comment = (_STAMP + source_hash()).encode()
         target = out_dir / f"{name}.fmu"
         os.chmod(partial, 0o644)  # mkstemp creates 0600; an FMU is shared like any build product
-        os.replace(partial, target)
-    return target
-
-
-def build_helper_library(source: Path) -> Path:
-    """Compile a small C helper of pendulab's own (not an FMU) into the cache, once per source version."""
-    text = source.read_bytes()
-    digest = hashlib.sha256(text).hexdigest()[:12]
-    suffix = {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}[platform.system()]
-    out_dir = default_fmu_dir() / ".helpers"
-    target = out_dir / f"{source.stem}-{digest}{suffix}"
-    if not target.exists():
-        compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-        if not compiler:
-            raise FmuBuildError("no C compiler found")
-        out_dir.mkdir(parents=True, exist_ok=True)
-        fd, partial = tempfile.mkstemp(dir=out_dir, suffix=suffix)
-        os.close(fd)
-        _compile(compiler, [source], [], Path(partial), windows=platform.system() == "Windows")
-        os.chmod(partial, 0o755)
         os.replace(partial, target)
     return target
 
@@ -215,15 +198,48 @@ def is_current(path: Path) -> bool:
         return False
 
 
+def find_fmu(name: str, out_dir: Path | None = None) -> Path | None:
+    """The ``<name>.fmu`` to use without building anything, or None (see :func:`ensure_fmu` for the order)."""
+    explicit = out_dir or os.environ.get("PENDULAB_FMU_DIR")
+    candidates = [Path(explicit) / f"{name}.fmu"] if explicit else []
+    if checkout_dir() is None:
+        candidates += [Path.cwd() / "fmus" / f"{name}.fmu", PREBUILT_FMUS / f"{name}.fmu"]
+    candidates.append(default_fmu_dir() / f"{name}.fmu")
+    for path in candidates:
+        if path.is_file() and (is_current(path) or not _ours(path) or find_compiler() is None or path.parent == PREBUILT_FMUS):
+            return path
+    return None
+
+
+def _ours(path: Path) -> bool:
+    """Whether ``path`` was built by pendulab (a user's own FMU is used as it is, never rebuilt)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return zf.comment.startswith(_STAMP.encode())
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
 def ensure_fmu(name: str, out_dir: Path | None = None, *, progress: Callable[[str], None] | None = None) -> Path:
-    """Path of ``<name>.fmu``, built first if it is missing or older than the sources."""
-    out_dir = Path(out_dir or default_fmu_dir())
-    path = out_dir / f"{name}.fmu"
-    if not is_current(path):
-        if progress:
-            progress(f"building {name}.fmu (first use) ...")
-        build_fmu(name, out_dir)
-    return path
+    """Path of ``<name>.fmu``; built first only where no usable one exists.
+
+    The first found is used: ``out_dir`` (or ``$PENDULAB_FMU_DIR``, which ``--fmus DIR`` sets); in an
+    installed package, the user's ``fmus/`` in the current folder, then the FMUs prebuilt inside the
+    package; last :func:`default_fmu_dir`. An FMU pendulab built from older sources is rebuilt where a
+    C compiler exists; a user's own FMU is never rebuilt. With nothing found, the FMU is built into
+    :func:`default_fmu_dir` (a C compiler is needed: :class:`~pendulab.native.CompilerNeeded` says how).
+
+    Examples
+    --------
+    >>> ensure_fmu("Plant").name                                   # doctest: +SKIP
+    'Plant.fmu'
+    """
+    found = find_fmu(name, out_dir)
+    if found is not None:
+        return found
+    if progress:
+        progress(f"building {name}.fmu (first use) ...")
+    return build_fmu(name, Path(out_dir) if out_dir else None)
 
 
 def build_all(out_dir: Path | None = None, names: Iterable[str] | None = None, *, progress: Callable[[str], None] = print) -> list[Path]:

@@ -1,0 +1,147 @@
+"""The one compile-and-cache helper (pendulab.native) and where FMUs are found (issue 23).
+
+A compiler is hidden by an empty PATH and an unset CC; a fake compiler is a script that records its calls.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from pendulab import native
+from pendulab.fmu import build as fmu_build
+
+SOURCE = "int pendulab_answer(void) { return 42; }\n"
+
+
+@pytest.fixture
+def no_compiler(monkeypatch, tmp_path):
+    """No C compiler anywhere: CC unset, PATH without one."""
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.setenv("PATH", str(tmp_path / "empty-bin"))
+    assert native.find_compiler() is None
+
+
+@pytest.fixture
+def cache(monkeypatch, tmp_path):
+    monkeypatch.setenv("PENDULAB_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def fake_compiler(folder: Path, record: Path) -> Path:
+    """A ``cc`` that records its arguments and fails, as a compiler that must not be called."""
+    folder.mkdir(parents=True, exist_ok=True)
+    script = folder / "cc"
+    script.write_text(f"#!/bin/sh\necho \"$@\" >> {record}\nexit 1\n")
+    script.chmod(0o755)
+    return script
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_compiles_once_then_loads_from_the_cache(cache):
+    import ctypes
+
+    first = native.shared_library(SOURCE, "answer")
+    second = native.shared_library(SOURCE, "answer")
+    assert first.built and not second.built and first.path == second.path
+    assert first.path.parent == cache / "native"
+    assert ctypes.CDLL(str(first.path)).pendulab_answer() == 42
+    # Other flags or another source: another library, never the old one.
+    assert native.shared_library(SOURCE, "answer", flags=("-O1",)).path != first.path
+    assert native.shared_library(SOURCE.replace("42", "43"), "answer").path != first.path
+    assert not list(cache.rglob("*.part")), "no half-written file is left"
+
+
+def test_prebuilt_library_is_found_without_a_compiler(no_compiler, cache, monkeypatch, tmp_path):
+    prebuilt = tmp_path / "prebuilt"
+    prebuilt.mkdir()
+    monkeypatch.setattr(native, "PREBUILT_DIR", prebuilt)
+    assert native.shared_library(SOURCE, "answer") is None, "nothing prebuilt, no compiler: the caller's fallback"
+    (prebuilt / native.library_name(SOURCE.encode(), "answer", ("-O2",))).write_bytes(b"stand-in")
+    found = native.shared_library(SOURCE, "answer")
+    assert found == (prebuilt / native.library_name(SOURCE.encode(), "answer", ("-O2",)), False)
+    assert native.shared_library(SOURCE, "answer", prebuilt=False) is None
+
+
+def test_a_feature_that_needs_a_compiler_says_which_and_how_in_one_line(no_compiler, cache):
+    with pytest.raises(native.CompilerNeeded) as info:
+        native.shared_library(SOURCE, "answer", feature="the answer")
+    message = str(info.value)
+    assert "\n" not in message and message.startswith("the answer needs a C compiler") and "apt-get install gcc" in message
+    assert "winget" in native.install_hint("Windows") and "xcode-select" in native.install_hint("Darwin")
+
+
+def test_cc_is_honoured_and_a_failing_compiler_falls_back(cache, monkeypatch, tmp_path):
+    record = tmp_path / "calls.txt"
+    monkeypatch.setenv("CC", str(fake_compiler(tmp_path / "bin", record)))
+    assert native.shared_library(SOURCE, "answer") is None
+    with pytest.raises(native.CompileFailed, match="compiling answer"):
+        native.shared_library(SOURCE, "answer", feature="the answer")
+    assert len(record.read_text().splitlines()) == 2 and "-shared" in record.read_text()
+
+
+def test_fit_functions_fall_back_to_casadis_virtual_machine(no_compiler, cache):
+    import casadi as ca
+
+    from pendulab.calibration._shooting import _compile
+
+    x = ca.SX.sym("x")
+    assert _compile([ca.Function("twice", [x], [2 * x])], "pendulab_test_twice") == (None, False)
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_fit_functions_compile_through_the_helper(cache):
+    import casadi as ca
+
+    from pendulab.calibration._shooting import _compile
+
+    x = ca.SX.sym("x")
+    library, built = _compile([ca.Function("thrice", [x], [3 * x])], "pendulab_test_thrice")
+    assert built and Path(library).parent == cache / "fit"
+    assert float(ca.external("thrice", library)(2.0)) == 6.0
+    assert _compile([ca.Function("thrice", [x], [3 * x])], "pendulab_test_thrice") == (library, False)
+
+
+def _stamped(path: Path, name: str, stale: bool = False) -> Path:
+    """A stand-in FMU file marked as pendulab's (current or stale)."""
+    path.mkdir(parents=True, exist_ok=True)
+    fmu = path / f"{name}.fmu"
+    with zipfile.ZipFile(fmu, "w") as zf:
+        zf.writestr("modelDescription.xml", "<fmiModelDescription/>")
+        zf.comment = (fmu_build._STAMP + ("0" * 16 if stale else fmu_build.source_hash())).encode()
+    return fmu
+
+
+def test_fmus_are_found_in_order_user_folder_then_package(monkeypatch, tmp_path, no_compiler):
+    """Installed (no checkout): --fmus DIR, then ./fmus, then the package's prebuilt FMUs; nothing is built."""
+    monkeypatch.setattr(fmu_build, "checkout_dir", lambda: None)
+    monkeypatch.setattr(fmu_build, "PREBUILT_FMUS", tmp_path / "package")
+    monkeypatch.setenv("PENDULAB_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("PENDULAB_FMU_DIR", raising=False)
+    monkeypatch.chdir(tmp_path)
+    packaged = _stamped(tmp_path / "package", "Plant")
+    assert fmu_build.ensure_fmu("Plant") == packaged
+    own = tmp_path / "fmus" / "Plant.fmu"  # the user's own FMU (not built by pendulab) in ./fmus
+    own.parent.mkdir()
+    own.write_bytes(b"PK\x05\x06" + bytes(18))
+    assert fmu_build.ensure_fmu("Plant") == own
+    explicit = _stamped(tmp_path / "mine", "Plant", stale=True)  # stale, but no compiler: used as it is
+    monkeypatch.setenv("PENDULAB_FMU_DIR", str(explicit.parent))
+    assert fmu_build.ensure_fmu("Plant") == explicit
+    # A missing FMU with nothing prebuilt and no compiler: one line saying what to install.
+    with pytest.raises(native.CompilerNeeded, match=r"^building Supervisor.fmu from source needs a C compiler"):
+        fmu_build.ensure_fmu("Supervisor")
+
+
+def test_cli_fmus_option(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}
+    run = subprocess.run([sys.executable, "-m", "pendulab", "simulate", "--demo", "--fmus", str(tmp_path / "nowhere")],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1, run.stderr
+    assert "--fmus" in run.stderr and "no such folder" in run.stderr and "Traceback" not in run.stderr
