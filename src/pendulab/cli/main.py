@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Subcommands that load FMUs, and so take ``--fmus DIR``.
-FMU_COMMANDS = frozenset({"simulate", "calibrate", "lab", "rig-emulator", "compare", "gui", "sweep", "lqr"})
+FMU_COMMANDS = frozenset({"simulate", "calibrate", "lab", "rig-emulator", "compare", "gui", "sweep"})
 
 
 def _use_fmu_dir(folder: str | None) -> None:
