@@ -28,12 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pendulab.analysis.results import write_results
+import pendulab
 from pendulab.blocks.build import build_block
-from pendulab.blocks.loop import simulate_block_controller
 from pendulab.blocks.lqr import DEFAULT_TAU, GAIN_NAMES, LQRController, design_lqr
 from pendulab.errors import UserError
-from pendulab.model.parameters import PlantParameters
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -45,7 +43,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     try:
-        params = PlantParameters.preset(pendulum=args.pendulum)
+        plant = pendulab.Plant(pendulum=args.pendulum)
+        params = pendulab.RunSpec(plant=plant).parameters()
         design = design_lqr(params)
         print("LQR gains (V = -K [x, xdot, alpha, alphadot]):")
         for name, k in zip(GAIN_NAMES, design.K):
@@ -55,14 +54,16 @@ def main(argv: list[str] | None = None) -> int:
         fmu = build_block(LQRController, args.out, start_values=design.start_values(tau=args.tau))
         print(f"built {fmu}")
 
-        result = simulate_block_controller(fmu, params, stop_time=args.stop_time)
+        # The block takes the generic Controller FMU's place in the lab's loop.
+        spec = pendulab.RunSpec(pendulab.ControllerSpec(fmu=str(fmu)), plant=plant, timing=pendulab.Timing(stop_time=args.stop_time))
+        result = pendulab.simulate(spec)
         columns = result.columns
-        paths = write_results(args.out, columns, {**result.meta, "pendulum": args.pendulum}, result.metrics)
+        paths = result.write(args.out)
     except UserError as exc:
         print(f"lqr_controller: error: {exc}", file=sys.stderr)
         return 2
 
-    cut = result.meta["safety_cut_time"]
+    cut = result.metrics["safety_cut_time_s"]
     print(f"max |alpha| = {np.degrees(np.abs(columns['alpha']).max()):.2f} deg, "
           f"max |x| = {100 * np.abs(columns['x']).max():.1f} cm, final x = {1000 * columns['x'][-1]:.1f} mm, "
           f"max |V| = {np.abs(columns['voltage_command']).max():.2f} V")

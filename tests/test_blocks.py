@@ -154,7 +154,7 @@ def test_lqr_balances_the_long_pendulum_through_the_poke(lqr_run, long_params: P
     poke = c["t"] >= long_params.poke_start
     assert np.degrees(np.abs(c["alpha"][poke]).max()) > 0.5  # the poke did push
     assert np.degrees(np.abs(c["alpha"]).max()) < 4.0
-    assert lqr_run.meta["safety_cut_time"] is None
+    assert lqr_run.metrics["safety_cut_time_s"] is None
     assert np.all(c["supervisor_state"] == RUNNING)
     assert lqr_run.metrics["stable"] is True
     assert np.all(np.isfinite(c["voltage_command"]))

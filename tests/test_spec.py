@@ -129,6 +129,8 @@ def test_simulate_runs_the_spec_and_its_files_carry_it(tmp_path, loop_fmus):
     paths = result.write(tmp_path / "run")
     meta = scipy.io.loadmat(paths["mat"], squeeze_me=True)["meta"]
     assert str(meta["pendulum"]) == "short" and int(meta["delay"]) == 1
+    # The run's meta is its serialization: the spec reads back from the file.
+    assert RunSpec.from_json(str(meta["run"])) == spec
     assert json.loads(paths["metrics"].read_text())["stable"] == result.metrics["stable"]
 
 

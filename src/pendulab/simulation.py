@@ -91,28 +91,15 @@ def simulate(
     pendulab.cosim.master.SimulationError
         An FMU refused a step (e.g. a poke so large that the state overflows).
     """
-    from pendulab import __version__
     from pendulab.analysis.metrics import compute_metrics
     from pendulab.cosim.master import Master, SimulationError
-    from pendulab.cosim.pendulum import RECORDED, collect_columns, pendulum_system
+    from pendulab.cosim.pendulum import RECORDED, collect_columns
 
     spec.validate()
     params = spec.parameters()
     timing = spec.timing
-    fmu_dir = Path(fmu_dir) if fmu_dir is not None else None
     block = spec.controller.fmu
-    if block is None:
-        from pendulab.control.realization import discretize
-
-        lti = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method)
-        system = pendulum_system(params, lti.to_parameters(), step=timing.step, supervisor=spec.supervisor_parameters(),
-                                 fmu_dir=fmu_dir, delay=timing.delay)
-    else:
-        from pendulab.blocks.loop import block_controller_system
-
-        system = block_controller_system(block, params, step=timing.step, supervisor=spec.supervisor_parameters(),
-                                         controller_parameters=dict(spec.controller.parameters), fmu_dir=fmu_dir,
-                                         delay=timing.delay)
+    system = build_system(spec, params, fmu_dir=Path(fmu_dir) if fmu_dir is not None else None)
     with Master(system) as master:
         try:
             log = master.run(timing.stop_time, [*RECORDED, *record], events=tuple(events), progress=progress)
@@ -132,30 +119,53 @@ def simulate(
     )
     for name in record:
         columns[name] = np.asarray(log[name])
-    info = _meta(spec, params, safety_cut, __version__)
+    info = run_meta(spec, params)
     info.update(meta or {})
     return SimulationResult(columns, metrics, info, spec)
 
 
-def _meta(spec: RunSpec, params: Any, safety_cut: float | None, version: str) -> dict[str, Any]:
-    """The ``meta`` struct of the run's files."""
+def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None) -> Any:
+    """The co-simulation system (:class:`pendulab.cosim.system.System`) of a run.
+
+    One branch per ``spec.plant.kind`` and controller kind; a new plant adds its branch here.
+    """
+    from pendulab.cosim.pendulum import pendulum_system
+
+    timing = spec.timing
+    supervisor = spec.supervisor_parameters()
     if spec.controller.fmu is not None:
-        return {
-            "controller": spec.describe_controller(),
-            "step": spec.timing.step,
-            "parameters": params.as_dict(),
-            "version": version,
-            "safety_cut_time": safety_cut,
-            "pendulum": spec.plant.pendulum,
-        }
-    return {
-        "controller": spec.describe_controller(),
-        "discretization": spec.timing.method,
-        "step": spec.timing.step,
-        "delay": spec.timing.delay,
-        "parameters": params.as_dict(),
-        "version": version,
-        "pendulum": spec.plant.pendulum,
-        "cart": spec.plant.cart,
-        "calibration": spec.plant.calibration or "default",
-    }
+        from pendulab.blocks.loop import block_controller_system
+
+        return block_controller_system(spec.controller.fmu, params, step=timing.step, supervisor=supervisor,
+                                       controller_parameters=dict(spec.controller.parameters), fmu_dir=fmu_dir,
+                                       delay=timing.delay)
+    from pendulab.control.realization import discretize
+
+    lti = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method)
+    return pendulum_system(params, lti.to_parameters(), step=timing.step, supervisor=supervisor, fmu_dir=fmu_dir,
+                           delay=timing.delay)
+
+
+def run_meta(spec: RunSpec, params: Any) -> dict[str, Any]:
+    """The ``meta`` struct of a run's files: the spec's serialization and what it resolves to.
+
+    ``run`` is :meth:`RunSpec.to_json` (``RunSpec.from_json(meta["run"])`` gives the spec back; MATLAB
+    reads it with ``jsondecode(meta.run)``); the other fields are the SPEC's (controller written out,
+    the plant's parameters, calibration, pendulum, version) and the timing.
+    """
+    from pendulab import __version__
+
+    meta: dict[str, Any] = {"controller": spec.describe_controller()}
+    if spec.controller.fmu is None:
+        meta["discretization"] = spec.timing.method
+    meta.update(
+        step=spec.timing.step,
+        delay=spec.timing.delay,
+        parameters=params.as_dict(),
+        version=__version__,
+        pendulum=spec.plant.pendulum,
+        cart=spec.plant.cart,
+        calibration=spec.plant.calibration or "default",
+        run=spec.to_json(),
+    )
+    return meta

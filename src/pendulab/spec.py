@@ -317,8 +317,13 @@ class RunSpec:
         return params
 
     def supervisor_parameters(self) -> dict[str, Any]:
-        """Start values for the Supervisor FMU (only the settings given)."""
-        return {f.name: getattr(self.supervisor, f.name) for f in fields(self.supervisor) if getattr(self.supervisor, f.name) is not None}
+        """Start values for the Supervisor FMU: the settings given (not ``None``), by their FMU names.
+
+        A field is the Supervisor FMU's parameter of the same name, unless its metadata says
+        ``{"fmu": False}`` (a setting the master acts on instead).
+        """
+        s = self.supervisor
+        return {f.name: getattr(s, f.name) for f in fields(s) if getattr(s, f.name) is not None and f.metadata.get("fmu", True)}
 
     def describe_controller(self) -> str:
         """The controller as the run's files name it."""

@@ -96,5 +96,6 @@ def simulate_block_controller(
     spec = RunSpec.for_parameters(controller, params, timing=Timing(stop_time=stop_time, step=step),
                                   supervisor=Supervisor(**dict(supervisor or {})))
     result = simulate(spec, record=record, fmu_dir=fmu_dir)
-    result.meta.pop("pendulum")
+    for key in ("pendulum", "cart", "calibration"):  # not known from the parameters alone
+        result.meta.pop(key)
     return result
