@@ -466,25 +466,28 @@ class _Plan:
 
         early_copies: dict[str, list] = {n: [] for n in order}
         late_copies: list = []
-        inputs: dict[tuple[str, str], tuple[Any, list[str]]] = {}
+        inputs: dict[tuple[str, str, bool], tuple[Any, list[str]]] = {}
         sets: dict[str, list] = {n: [] for n in order}
         late_sets: list = []
+        # An input fed by a component evaluated at or after its own is set late (after that component's
+        # outputs at the same point, before the step); the others are set before the component's outputs.
+        late_input = {(c.target, c.target_variable): position[c.source] >= position[c.target] for c in system.connections}
         for name in order:
             inst = master.instances[name]
             targets = [c.target_variable for c in system.connections if c.target == name]
             for t in _TYPES:
-                names = [v for v in dict.fromkeys(targets) if _base(inst.variable(v).type) == t]
-                if not names:
-                    continue
-                buf = (_C_TYPES[t] * len(names))()
-                vrs = (ctypes.c_uint * len(names))(*(inst.variable(v).valueReference for v in names))
-                f = _GET((f"fmi2Set{t}".encode(), inst.fmu.dll))
-                self._keep += [buf, vrs, f]
-                self._labels[id(f)] = f"{name}: fmi2Set{t}"
-                inputs[(name, t)] = (buf, names)
-                call = (f, inst.handle, ctypes.addressof(vrs), len(names), ctypes.addressof(buf))
-                is_late = any(position[c.source] >= position[name] for c in system.connections if c.target == name)
-                (late_sets if is_late else sets[name]).append(call)
+                for is_late in (False, True):
+                    names = [v for v in dict.fromkeys(targets) if _base(inst.variable(v).type) == t and late_input[(name, v)] == is_late]
+                    if not names:
+                        continue
+                    buf = (_C_TYPES[t] * len(names))()
+                    vrs = (ctypes.c_uint * len(names))(*(inst.variable(v).valueReference for v in names))
+                    f = _GET((f"fmi2Set{t}".encode(), inst.fmu.dll))
+                    self._keep += [buf, vrs, f]
+                    self._labels[id(f)] = f"{name}: fmi2Set{t}"
+                    inputs[(name, t, is_late)] = (buf, names)
+                    call = (f, inst.handle, ctypes.addressof(vrs), len(names), ctypes.addressof(buf))
+                    (late_sets if is_late else sets[name]).append(call)
         for c in system.connections:
             src_inst, dst_inst = master.instances[c.source], master.instances[c.target]
             st = _base(src_inst.variable(c.source_variable).type)
@@ -492,10 +495,10 @@ class _Plan:
             if st != tt:
                 raise UserError(f"connection {c} joins a {st} to a {tt}; connect variables of the same type")
             log, names = self._logs[(c.source, st)]
-            buf, in_names = inputs[(c.target, tt)]
+            is_late = late_input[(c.target, c.target_variable)]
+            buf, in_names = inputs[(c.target, tt, is_late)]
             first = (self._pad[c.source] - c.delay) * len(names)  # index in the padded log of row k = 0
             copy = (flat[(c.source, st)], (len(names), first + names.index(c.source_variable)), buf, in_names.index(c.target_variable))
-            is_late = any(position[x.source] >= position[c.target] for x in system.connections if x.target == c.target)
             (late_copies if is_late else early_copies[c.target]).append(copy)
         self.phase_a = [(early_copies[n], sets[n], gets_of[n]) for n in order]
         self.late = (late_copies, late_sets)

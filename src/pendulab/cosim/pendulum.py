@@ -24,14 +24,19 @@ from pendulab.model.parameters import PlantParameters
 from pendulab.simulation import SimulationResult
 
 #: The loop's wiring, by variable name (SPEC §7): the measured angle feeds controller and supervisor,
-#: the supervisor owns the motor voltage.
+#: the supervisor owns the motor voltage, the controller's reference (re-centring) and its engagement
+#: (swing-up). With both modes off, r stays 0 and the controller stays engaged: the loop of SPEC §4.
 CONNECTIONS = (
     ("plant.alpha_measured", "controller.alpha_measured"),
     ("plant.alpha_measured", "supervisor.alpha_measured"),
     ("plant.x_measured", "supervisor.x_measured"),
     ("controller.V_command", "supervisor.V_command"),
     ("supervisor.V", "plant.V"),
+    ("supervisor.r", "controller.r"),
+    ("supervisor.controller_engaged", "controller.engaged"),
 )
+#: The supervisor-mode connections a controller FMU of another make may lack (then the modes are refused).
+MODE_INPUTS = ("controller.r", "controller.engaged")
 
 #: The plant FMUs the loop can name: the same model as FMI 2.0 (default) and FMI 3.0.
 PLANT_FMUS = ("Plant", "Plant3")
@@ -89,11 +94,41 @@ def pendulum_system(
     system = System(step=step)
     plant_start = {**params.as_dict(), **(initial_state or {})}
     system.add("plant", ensure_fmu(plant, fmu_dir), plant_start)
-    system.add("controller", controller_fmu or ensure_fmu("Controller", fmu_dir), {"Lp": params.Lp, "h": step, **controller_parameters})
-    system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), dict(supervisor or {}))
+    supervisor = dict(supervisor or {})
+    swing_up = bool(supervisor.get("swing_up", False))
+    controller_start = {"Lp": params.Lp, "h": step, **controller_parameters}
+    if swing_up and controller_fmu is None:
+        controller_start["wrap_angle"] = True  # the pendulum may turn over while it swings up
+    controller = system.add("controller", controller_fmu or ensure_fmu("Controller", fmu_dir), controller_start)
+    if swing_up:
+        supervisor.setdefault("pendulum_frequency", hanging_frequency(params))
+    system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), supervisor)
+    has = _inputs_of(controller.fmu) if controller_fmu is not None else None
     for source, target in CONNECTIONS:
+        if has is not None and target in MODE_INPUTS and target.partition(".")[2] not in has:
+            if supervisor.get("recentre") or swing_up:
+                raise UserError(f"controller FMU {controller.fmu.name} has no input {target.partition('.')[2]!r}: "
+                                "re-centring and swing-up need a controller with inputs r and engaged")
+            continue
         system.connect(source, target, delay=delay if target == VOLTAGE_INPUT else 0)
     return system
+
+
+def hanging_frequency(params: PlantParameters) -> float:
+    """Small-swing frequency (rad/s) of the hanging pendulum about its pivot: the swing-up's energy scale.
+
+    Examples
+    --------
+    >>> round(hanging_frequency(PlantParameters.preset()), 2)
+    4.75
+    """
+    return float(np.sqrt(params.Mp * params.g * params.lp / (params.Ip + params.Mp * params.lp**2)))
+
+
+def _inputs_of(fmu: Path) -> set[str]:
+    from fmpy import read_model_description
+
+    return {v.name for v in read_model_description(str(fmu)).modelVariables if v.causality == "input"}
 
 
 def simulate_poke(

@@ -3,7 +3,8 @@
 A new controller is a new set of parameter values, never a new binary: the student's G(s) is
 discretized in Python (:mod:`pendulab.control.realization`) and its matrices set as start values.
 The block forms the error itself, ``e = r - Lp * alpha_measured``, and outputs ``V_command = C x + D e``;
-each step ``x <- A x + B e``.
+each step ``x <- A x + B e``. The reference ``r`` (an input, 0 unless the supervisor re-centres the cart) and
+``engaged`` (false: held in reset while the supervisor swings the pendulum up) come from the supervisor.
 """
 
 from __future__ import annotations
@@ -33,6 +34,12 @@ def spec() -> ModelSpec:
     variables += [Variable(f"B[{i}]", "Real", "parameter", start=0.0, description=f"Input matrix entry {i}", initial="exact") for i in range(1, n + 1)]
     variables += [Variable(f"C[{i}]", "Real", "parameter", start=0.0, unit="V", description=f"Output matrix entry {i}", initial="exact") for i in range(1, n + 1)]
     variables.append(Variable("n", "Integer", "parameter", start=0, description=f"Controller order (0..{n})", initial="exact"))
+    variables += [
+        Variable("engaged", "Boolean", "input", start=True,
+                 description="The controller runs; false holds it in reset (state 0), so it starts fresh when engaged again"),
+        Variable("wrap_angle", "Boolean", "parameter", start=False, initial="exact",
+                 description="Wrap alpha_measured into (-pi, pi] (a pendulum that may turn over, as in a swing-up)"),
+    ]
     return ModelSpec(
         identifier="Controller",
         description="Student controller: discrete linear time-invariant block x+ = A x + B e, V = C x + D e, e = r - Lp*alpha",

@@ -5,6 +5,10 @@
 
 #include "fmu_model.h"
 
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
 typedef struct {
     double x[MAX_ORDER];
     double next[MAX_ORDER];
@@ -34,7 +38,15 @@ Status model_initialize(Instance *comp) {
     return OK;
 }
 
-static double error_signal(const Instance *comp) { return comp->r[VR_r] - comp->r[VR_Lp] * comp->r[VR_alpha_measured]; }
+static double error_signal(const Instance *comp) {
+    double alpha = comp->r[VR_alpha_measured];
+    if (comp->b[VR_wrap_angle] && isfinite(alpha) && (alpha > M_PI || alpha <= -M_PI)) {
+        alpha = fmod(alpha, 2 * M_PI);
+        if (alpha <= -M_PI) alpha += 2 * M_PI;
+        else if (alpha > M_PI) alpha -= 2 * M_PI;
+    }
+    return comp->r[VR_r] - comp->r[VR_Lp] * alpha;
+}
 
 void model_update_outputs(Instance *comp) {
     const Work *w = (const Work *)comp->work;
@@ -56,6 +68,10 @@ Status model_do_step(Instance *comp, double t, double h) {
     if (fabs(h - comp->r[VR_h]) > 1e-9 + 1e-6 * comp->r[VR_h]) {
         fmu_log(comp, Error, "logStatusError", "communication step %g s differs from the controller's sample period h=%g s", h, comp->r[VR_h]);
         return Error;
+    }
+    if (!comp->b[VR_engaged]) {  /* held in reset until the supervisor engages it */
+        memset(w->x, 0, sizeof(w->x));
+        return OK;
     }
     for (i = 0; i < n; i++) {
         double s = B[i] * e;

@@ -10,6 +10,9 @@ States (output ``state``)::
     idle --start--> running            (rig mode: --> waiting for capture --|alpha| < capture_window--> running)
     running --pause--> paused --start--> running (rig mode: through the capture window again)
     running --limit crossed / non-finite input--> tripped (latched, V = 0)
+    swing_up: idle --start--> swinging up --catch window--> running --falls within catch_hold-->
+              swinging up (again, up to swing_tries misses, then tripped: catch missed)
+              swinging up --swing_time_max / swing_x_limit / non-finite input--> tripped
     tripped --rearm (limits OK)--> idle;  tripped --start (limits OK)--> running (re-armed and started)
     any --end--> ended (final)
 
@@ -29,7 +32,7 @@ import math
 from pendulab.fmu.description import ModelSpec, Variable
 
 # ---------------------------------------------------------------- codes shared with model.c
-IDLE, WAITING, RUNNING, PAUSED, TRIPPED, ENDED = range(6)
+IDLE, WAITING, RUNNING, PAUSED, TRIPPED, ENDED, SWINGING = range(7)
 #: ``state`` output code -> name.
 STATES: dict[int, str] = {
     IDLE: "idle",
@@ -38,9 +41,10 @@ STATES: dict[int, str] = {
     PAUSED: "paused",
     TRIPPED: "tripped",
     ENDED: "ended",
+    SWINGING: "swinging up",
 }
 
-NO_TRIP, TRIP_ANGLE, TRIP_TRACK, TRIP_VOLTAGE, TRIP_MEASUREMENT = range(5)
+NO_TRIP, TRIP_ANGLE, TRIP_TRACK, TRIP_VOLTAGE, TRIP_MEASUREMENT, TRIP_SWING_TIME, TRIP_CATCH = range(7)
 #: ``trip_reason`` output code -> name.
 TRIP_REASONS: dict[int, str] = {
     NO_TRIP: "none",
@@ -48,6 +52,8 @@ TRIP_REASONS: dict[int, str] = {
     TRIP_TRACK: "track limit",
     TRIP_VOLTAGE: "non-finite voltage command",
     TRIP_MEASUREMENT: "non-finite measurement",
+    TRIP_SWING_TIME: "swing-up timed out",
+    TRIP_CATCH: "catch missed",
 }
 
 #: Operator command name -> ``command`` input code. The master sets a code for one step, then 0;
@@ -64,6 +70,19 @@ X_MAX_DEFAULT = 0.40
 CAPTURE_WINDOW_DEFAULT = math.radians(2.0)
 CENTRE_TOLERANCE_DEFAULT = 0.01
 V_LIMIT_DEFAULT = 10.0
+#: Re-centring (the old lab's "kickback"): engage beyond RECENTRE_X_ON, release inside RECENTRE_X_OFF.
+RECENTRE_X_ON = 0.05
+RECENTRE_X_OFF = 0.02
+RECENTRE_GAIN = 0.2
+RECENTRE_R_MAX = 0.005
+RECENTRE_SLEW = 0.05
+#: Swing-up (Quanser's self-erecting pendulum): the catch window and the set point's speed limit.
+CATCH_X = 0.20
+#: Quanser's window allows 15 deg; the hand-over waits until 8 deg, from where a tip-only loop such as the demo
+#: controller holds the pendulum (from 15 deg it overshoots past the angle limit: measured, issue 21).
+CATCH_ALPHA = math.radians(8.0)
+CATCH_RATE = math.radians(150.0)
+SWING_SPEED_MAX = 0.7
 #: Slack (rad) on the alpha_max range so that a rounded 15 deg (0.2618 rad) is accepted.
 ALPHA_MAX_SLACK = 1e-6
 
@@ -139,7 +158,8 @@ def spec() -> ModelSpec:
     ]
     defines = {
         **{f"STATE_{name.split()[0].upper()}": str(code) for code, name in STATES.items()},
-        **{f"TRIP_{key}": str(code) for key, code in zip(("NONE", "ANGLE", "TRACK", "VOLTAGE", "MEASUREMENT"), TRIP_REASONS)},
+        **{f"TRIP_{key}": str(code) for key, code in
+           zip(("NONE", "ANGLE", "TRACK", "VOLTAGE", "MEASUREMENT", "SWING_TIME", "CATCH"), TRIP_REASONS)},
         **{f"CMD_{name.upper()}": str(code) for name, code in COMMANDS.items()},
         "N_STATE_CODES": str(len(STATES)),
         "STATE_NAMES": _c_names(STATES),
@@ -148,10 +168,62 @@ def spec() -> ModelSpec:
         "ALPHA_MAX_MAX_DEG": repr(hi),
         "ALPHA_MAX_SLACK": repr(ALPHA_MAX_SLACK),
     }
+    variables += _mode_variables()
     return ModelSpec(
         identifier="Supervisor",
         description="Lab supervisor: angle and track limits with latched trips, start / pause / end / re-arm, "
-        "upright capture for the rig, calibration mode; gates the voltage and owns the motor enable",
+        "upright capture for the rig, calibration mode, cart re-centring through the reference r, energy-based "
+        "swing-up with a catch window; gates the voltage and owns the motor enable",
         variables=variables,
         defines=defines,
     )
+
+
+def _mode_variables() -> list[Variable]:
+    """Re-centring and swing-up (SPEC §5): their outputs and parameters."""
+
+    def real(name: str, start: float, unit: str, description: str) -> Variable:
+        return Variable(name, "Real", "parameter", start=start, unit=unit, initial="exact", description=description)
+
+    return [
+        Variable("r", "Real", "output", unit="m",
+                 description="Tip reference for the controller (e = r - Lp*alpha): 0 unless re-centring acts"),
+        Variable("swing_voltage", "Real", "output", unit="V",
+                 description="The swing-up's voltage (applied as V while swinging up)"),
+        Variable("energy", "Real", "output", unit="1",
+                 description="Pendulum energy over Mp*g*lp: 0 at rest upright, -2 at rest hanging"),
+        real("recentre_x_on", RECENTRE_X_ON, "m", "Re-centring engages when |x_measured| exceeds this"),
+        real("recentre_x_off", RECENTRE_X_OFF, "m", "Re-centring lets go (r slews back to 0) when |x_measured| is below this"),
+        real("recentre_gain", RECENTRE_GAIN, "m/m", "Re-centring's outer loop: r = recentre_gain * x_measured while engaged"),
+        real("recentre_r_max", RECENTRE_R_MAX, "m", "Largest |r| re-centring applies"),
+        real("recentre_slew", RECENTRE_SLEW, "m/s", "Largest rate of change of r"),
+        real("pendulum_frequency", math.sqrt(0.230 * 9.81 * 0.3302 / (7.884e-3 + 0.230 * 0.3302**2)), "rad/s",
+             "Small-swing frequency of the hanging pendulum, sqrt(Mp*g*lp/(Ip+Mp*lp^2)): scales the energy"),
+        real("swing_energy_gain", 60.0, "m/s2", "Swing-up law: cart acceleration per unit of missing energy (Astrom-Furuta)"),
+        real("swing_energy_target", 0.0, "1", "Energy the swing-up aims at, over Mp*g*lp (0: just reaching upright)"),
+        real("swing_accel_max", 3.0, "m/s2", "Largest cart acceleration the swing-up asks for"),
+        real("swing_speed_max", SWING_SPEED_MAX, "m/s", "Largest speed of the cart's set point while swinging up"),
+        real("swing_travel", 0.20, "m", "The cart's set point stays within +-swing_travel while swinging up"),
+        real("swing_centring", 0.7, "rad/s", "Spring that pulls the set point back to the centre while swinging up"),
+        real("swing_kp", 60.0, "V/m", "Cart servo while swinging up: voltage per metre of set point error"),
+        real("swing_kd", 8.0, "V.s/m", "Cart servo while swinging up: voltage per m/s of set point speed error"),
+        real("swing_kff", 7.0, "V.s/m", "Cart servo while swinging up: voltage per m/s of set point speed (back-EMF and drag)"),
+        real("swing_V_limit", 6.0, "V", "Clamp of the voltage while swinging up"),
+        real("swing_x_limit", 0.33, "m", "Track limit while swinging up: beyond it the swing trips"),
+        real("swing_time_max", 30.0, "s", "Longest time from the start of a swing-up to a held catch: then it trips"),
+        real("catch_x", CATCH_X, "m", "Catch window: |x_measured| below this"),
+        real("catch_alpha", CATCH_ALPHA, "rad", "Catch window: |alpha| below this"),
+        real("catch_rate", CATCH_RATE, "rad/s", "Catch window: |dalpha/dt| below this"),
+        real("catch_hold", 1.0, "s", "A fall past alpha_max within this time of a catch is a missed catch: swing again"),
+        real("rate_filter", 0.01, "s", "Time constant of the speed estimates (filtered differences of the measurements)"),
+        Variable("swing_tries", "Integer", "parameter", start=3, initial="exact",
+                 description="Missed catches after which the swing-up stops (trip: catch missed)"),
+        Variable("misses", "Integer", "output", description="Missed catches so far"),
+        Variable("recentre", "Boolean", "parameter", start=False, initial="exact",
+                 description="Re-centring: a slow outer loop on the cart position acts through r (off: r = 0)"),
+        Variable("swing_up", "Boolean", "parameter", start=False, initial="exact",
+                 description="Start swings the pendulum up from hanging and hands over inside the catch window"),
+        Variable("recentring", "Boolean", "output", description="Re-centring is engaged (r follows the cart)"),
+        Variable("controller_engaged", "Boolean", "output",
+                 description="The controller runs (false while swinging up: held in reset, engaged fresh at the catch)"),
+    ]
