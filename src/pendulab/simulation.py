@@ -95,6 +95,10 @@ def simulate(
     from pendulab.cosim.master import Master, SimulationError
     from pendulab.cosim.pendulum import RECORDED, collect_columns
 
+    modes = spec.supervisor.recentre or spec.supervisor.swing_up
+    # The modes' signals are recorded (and written) only in runs that use a mode: other runs' files are as before.
+    mode_recorded = tuple(MODE_COLUMNS) if modes else ()
+
     spec.validate()
     params = spec.parameters()
     timing = spec.timing
@@ -102,7 +106,7 @@ def simulate(
     system = build_system(spec, params, fmu_dir=Path(fmu_dir) if fmu_dir is not None else None)
     with Master(system) as master:
         try:
-            log = master.run(timing.stop_time, [*RECORDED, *record], events=tuple(events), progress=progress)
+            log = master.run(timing.stop_time, [*RECORDED, *mode_recorded, *record], events=tuple(events), progress=progress)
         except SimulationError as exc:
             if block is not None:
                 from pendulab.blocks.base import block_error
@@ -113,13 +117,33 @@ def simulate(
             raise
     columns = collect_columns(log, params)
     safety_cut = columns.pop("_safety_cut_time")
+    for path, name in MODE_COLUMNS.items():
+        if path in mode_recorded:
+            columns[name] = np.asarray(log[path], dtype=float)
+    if spec.supervisor.swing_up:
+        # The pendulum may turn over while it swings: angles from upright, in (-pi, pi] as the supervisor sees them.
+        for name in ("alpha", "alpha_measured"):
+            columns[name] = np.remainder(columns[name] + np.pi, 2 * np.pi) - np.pi
+        columns["tip"] = params.Lp * columns["alpha"]
+    moments: dict[str, Any] = {}
+    if modes:
+        from pendulab.analysis.modes import mode_events, mode_metrics
+
+        moments = mode_metrics(columns["t"], columns["supervisor_state"], recentring=columns["recentring"], x=columns["x"])
+    # A swing-up run's response is measured from the catch on (the hand-over is its disturbance).
+    start = moments.get("catch_time_s") if spec.supervisor.swing_up else None
+    first = 0 if start is None else int(np.searchsorted(columns["t"], start))
     metrics = compute_metrics(
-        columns["t"], columns["alpha"], poke_start=params.poke_start, q_alpha=params.q_alpha,
-        xdot=columns["xdot"], safety_cut_time=safety_cut,
+        columns["t"][first:], columns["alpha"][first:], poke_start=params.poke_start if start is None else start,
+        q_alpha=params.q_alpha, xdot=columns["xdot"][first:], safety_cut_time=safety_cut,
     )
+    metrics.update(moments)
     for name in record:
         columns[name] = np.asarray(log[name])
     info = run_meta(spec, params)
+    if modes:
+        info.update(recentre=spec.supervisor.recentre, swing_up=spec.supervisor.swing_up, start=spec.plant.start,
+                    mode_events=mode_events(columns["t"], columns["supervisor_state"], recentring=columns["recentring"]))
     info.update(meta or {})
     return SimulationResult(columns, metrics, info, spec)
 
@@ -143,7 +167,11 @@ def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None) -> 
 
     lti = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method)
     return pendulum_system(params, lti.to_parameters(), step=timing.step, supervisor=supervisor, fmu_dir=fmu_dir,
-                           delay=timing.delay)
+                           delay=timing.delay, initial_state=spec.initial_state())
+
+
+#: The supervisor modes' signals (runs with re-centring or swing-up) -> their columns.
+MODE_COLUMNS = {"supervisor.r": "reference", "supervisor.recentring": "recentring", "supervisor.misses": "missed_catches"}
 
 
 def run_meta(spec: RunSpec, params: Any) -> dict[str, Any]:

@@ -87,6 +87,8 @@ class Plant:
     overrides : mapping of str to float
         Plant parameters by name (:class:`~pendulab.model.parameters.PlantParameters`), applied after
         the preset and the calibration.
+    start : {"upright", "hanging"}
+        The pendulum at t = 0: upright at rest (default), or hanging at rest (for ``supervisor.swing_up``).
     """
 
     kind: str = _choice(*PLANT_KINDS, default="pendulum")
@@ -94,6 +96,7 @@ class Plant:
     cart: str = "ip02"
     calibration: str | None = None
     overrides: Mapping[str, float] = _mapping_field()
+    start: str = _choice("upright", "hanging", default="upright")
 
     def validate(self) -> None:
         """Nothing to check alone: :meth:`RunSpec.validate` checks the preset, calibration and controller."""
@@ -193,10 +196,19 @@ class Supervisor:
         Angle limit in rad (10 to 15 degrees; default 15 degrees).
     x_max : float, optional
         Track limit in m (default 0.40).
+    recentre : bool
+        Re-centring (the old lab's "kickback"): a slow outer loop on the cart position acts through the
+        controller's reference r before the cart nears the track limit (default off: r = 0, as in the
+        old lab's runs).
+    swing_up : bool
+        Swing the pendulum up from hanging (energy law) and hand it to the controller inside the catch
+        window (default off).
     """
 
     alpha_max: float | None = None
     x_max: float | None = None
+    recentre: bool = False
+    swing_up: bool = False
 
     def validate(self) -> None:
         """Check this section's own rules (UserError with the command line's message)."""
@@ -208,6 +220,9 @@ class Supervisor:
                 raise UserError(f"supervisor.alpha_max {self.alpha_max:g} rad must be {ALPHA_MAX_RANGE_DEG[0]:g} to {ALPHA_MAX_RANGE_DEG[1]:g} degrees")
         if self.x_max is not None and not (math.isfinite(self.x_max) and self.x_max > 0):
             raise UserError(f"supervisor.x_max {self.x_max} must be a positive distance in m")
+        for name in ("recentre", "swing_up"):
+            if not isinstance(getattr(self, name), bool):
+                raise UserError(f"supervisor.{name} {getattr(self, name)!r} must be true or false")
 
 
 #: The sections of a RunSpec, by field name.
@@ -238,7 +253,7 @@ class RunSpec:
     >>> from pendulab.control import Controller
     >>> spec = RunSpec(Controller.pid(40, 5, 4), plant=Plant(pendulum="short"))
     >>> spec.to_dict()["plant"]
-    {'kind': 'pendulum', 'pendulum': 'short', 'cart': 'ip02', 'calibration': None, 'overrides': {}}
+    {'kind': 'pendulum', 'pendulum': 'short', 'cart': 'ip02', 'calibration': None, 'overrides': {}, 'start': 'upright'}
     >>> spec.parameters().Lp
     0.3365
     """
@@ -287,6 +302,8 @@ class RunSpec:
             raise UserError("a run needs one controller: a transfer function (kernel and compensators) or a controller block FMU")
         if c.fmu is not None and not Path(c.fmu).is_file():
             raise UserError(f"controller FMU {c.fmu} does not exist; build it with pendulab.blocks.build_block")
+        if self.plant.start == "hanging" and not self.supervisor.swing_up:
+            raise UserError("the pendulum starts hanging but nothing swings it up: add --swing-up (or start it upright)")
         self.parameters()  # the preset, the calibration file and the overrides
         return self
 
@@ -317,13 +334,19 @@ class RunSpec:
         return params
 
     def supervisor_parameters(self) -> dict[str, Any]:
-        """Start values for the Supervisor FMU: the settings given (not ``None``), by their FMU names.
+        """Start values for the Supervisor FMU: the settings given (not ``None``; a mode only when it is on),
+        by their FMU names.
 
         A field is the Supervisor FMU's parameter of the same name, unless its metadata says
         ``{"fmu": False}`` (a setting the master acts on instead).
         """
         s = self.supervisor
-        return {f.name: getattr(s, f.name) for f in fields(s) if getattr(s, f.name) is not None and f.metadata.get("fmu", True)}
+        return {f.name: getattr(s, f.name) for f in fields(s)
+                if getattr(s, f.name) is not None and getattr(s, f.name) is not False and f.metadata.get("fmu", True)}
+
+    def initial_state(self) -> dict[str, float]:
+        """The plant's start values for the pendulum's pose at t = 0 (``plant.start``)."""
+        return {"alpha": math.pi} if self.plant.start == "hanging" else {}
 
     def describe_controller(self) -> str:
         """The controller as the run's files name it."""

@@ -173,13 +173,22 @@ def run_figures(
         safety_cut_time = float(t[tripped[0]]) if tripped.size else None
     limit = float(voltage_limit) if voltage_limit is not None else DEFAULT_VOLTAGE_LIMIT
     marks = [(poke_start, "poke", "C3", "--"), (safety_cut_time, "safety cut", "k", ":")]
+    spans: list[list[float]] = []
+    if "supervisor_state" in cols and cols["supervisor_state"].size == t.size:
+        # The supervisor's modes (issue 21): swing start and catches as lines, re-centring as shaded spans.
+        from pendulab.analysis.modes import mode_metrics
+
+        moments = mode_metrics(t, cols["supervisor_state"], recentring=cols.get("recentring"))
+        marks.append((moments["swing_start_s"], "swing-up starts", "C2", "-."))
+        marks += [(when, "catch" if k == 0 else None, "C4", "-") for k, when in enumerate(moments["catch_times_s"])]
+        spans = moments.get("recentre_intervals_s", [])
     start = poke_start if poke_start is not None else (float(t[0]) if t.size else 0.0)
     panels = (_response_panel(start), *_PANELS[:-1], _voltage_panel(limit))
 
     fig = _figure((9.5, 11.0))
     axes = fig.subplots(len(panels), 1)
     for ax, panel in zip(axes, panels):
-        _draw_panel(ax, panel, t, cols, marks)
+        _draw_panel(ax, panel, t, cols, marks, spans)
     for ax in axes[2:]:
         ax.sharex(axes[1])
     for ax in axes[1:-1]:
@@ -193,7 +202,7 @@ def run_figures(
     for panel in panels:
         fig = _figure((9.5, 3.2))
         ax = fig.subplots()
-        _draw_panel(ax, panel, t, cols, marks)
+        _draw_panel(ax, panel, t, cols, marks, spans)
         ax.set_title(f"{panel.title}{' - ' + title if title else ''}")
         ax.set_xlabel("time (s)")
         figures.append((panel.file, fig))
@@ -249,8 +258,11 @@ def _voltage_panel(limit: float) -> _Panel:
     return _Panel("voltage.png", f"Motor voltage (amplifier range ±{limit:g} V)", "voltage (V)", draw)
 
 
-def _draw_panel(ax: Axes, panel: _Panel, t: np.ndarray, cols: Mapping[str, np.ndarray], marks: list) -> None:
+def _draw_panel(ax: Axes, panel: _Panel, t: np.ndarray, cols: Mapping[str, np.ndarray], marks: list,
+                spans: list | None = None) -> None:
     drawn = panel.draw(ax, t, cols)
+    for k, (start, end) in enumerate(spans or []):
+        ax.axvspan(start, end, color="C9", alpha=0.15, lw=0, label="re-centring acts" if k == 0 else None)
     if not drawn:
         ax.text(0.5, 0.5, "not logged in this run", transform=ax.transAxes, ha="center", va="center", color="0.5")
     lo, hi = ax.get_xlim() if panel.own_xlim else (t[0], t[-1]) if t.size else (0.0, 1.0)

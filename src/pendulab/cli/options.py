@@ -88,3 +88,16 @@ def add_overwrite_option(parser: argparse.ArgumentParser) -> None:
     """``--overwrite``: replace an earlier result at the output path (refused without it; see :mod:`pendulab.outputs`)."""
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an earlier result at the output path (its files are removed first; without this, refused)")
+
+
+def add_mode_options(parser: argparse.ArgumentParser, *, start: bool = True) -> None:
+    """The supervisor's modes: ``--recentre``, ``--swing-up`` (and ``--start`` where the start pose is chosen)."""
+    modes = parser.add_argument_group("supervisor modes")
+    modes.add_argument("--recentre", action="store_true",
+                       help="re-centre the cart: a slow outer loop on the cart position acts through the controller's "
+                            "reference r before the cart nears the track limit (off by default, as in the old lab)")
+    modes.add_argument("--swing-up", action="store_true",
+                       help="swing the pendulum up from hanging and hand it to the controller inside the catch window")
+    if start:
+        modes.add_argument("--start", choices=("upright", "hanging"), default="upright",
+                           help="the pendulum at t = 0 (default upright; hanging needs --swing-up)")

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pendulab.cli.options import add_controller_options, add_overwrite_option, add_plant_options, controller_from_args
+from pendulab.cli.options import add_controller_options, add_mode_options, add_overwrite_option, add_plant_options, controller_from_args
 from pendulab.errors import UserError
 from pendulab.outputs import run_folder
 from pendulab.spec import MAX_STEPS, POKE_DEFAULT  # noqa: F401  (POKE_DEFAULT: used by lab)
@@ -31,7 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pendulab simulate --demo\n"
             "  pendulab simulate --zeros=-3,-6 --poles=-30,-0.1 --gain 80 --plot\n"
             "  pendulab simulate --controller my_controller.toml --pendulum short --animate\n"
-            "  pendulab simulate --pid 40,5,4 --poke 220,0.005,1"
+            "  pendulab simulate --pid 40,5,4 --poke 220,0.005,1\n"
+            "  pendulab simulate --demo --poke 220,0.005,1 --stop-time 60 --delay 2 --recentre\n"
+            "  pendulab simulate --demo --start hanging --swing-up --stop-time 20 --plot"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -44,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--delay", type=int, default=0, metavar="N",
                         help="transport delay of N control periods before the plant, as on the rig (default 0; compare with a rig run at its N)")
     parser.add_argument("--no-quantization", action="store_true", help="ideal encoders (no quantization)")
+    add_mode_options(parser)
     parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: a new folder under runs/)")
     add_overwrite_option(parser)
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
@@ -78,7 +81,7 @@ def check_run_settings(stop_time: float, step: float, delay: int) -> None:
 
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """The run the options describe (asking on a terminal when no controller is given), validated."""
-    from pendulab.spec import Plant, Poke, Quantization, RunSpec, Timing
+    from pendulab.spec import Plant, Poke, Quantization, RunSpec, Supervisor, Timing
 
     timing = Timing(stop_time=args.stop_time, step=args.step, method=args.method, delay=args.delay)
     timing.validate()
@@ -97,10 +100,11 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
         poke = poke or answers.poke
     spec = RunSpec(
         controller,
-        plant=Plant(pendulum=pendulum, cart=args.cart, calibration=str(calibration) if calibration else None),
+        plant=Plant(pendulum=pendulum, cart=args.cart, calibration=str(calibration) if calibration else None, start=args.start),
         poke=Poke(*(poke or POKE_DEFAULT)),
         timing=timing,
         quantization=Quantization(enabled=not args.no_quantization),
+        supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up),
     )
     return spec.validate()
 
@@ -132,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.analysis.plots import plot_run
 
         written += plot_run(
-            result.columns, out_dir, title=f"{spec.plant.pendulum} pendulum: {result.meta['controller']}", poke_start=params.poke_start,
+            result.columns, out_dir, title=f"{spec.plant.pendulum} pendulum: {result.meta['controller']}",
+            poke_start=None if spec.supervisor.swing_up else params.poke_start,
             safety_cut_time=result.metrics.get("safety_cut_time_s"), voltage_limit=params.V_max,
         )
     if args.animate:
@@ -184,4 +189,13 @@ def _print_summary(result: Any, out_dir: Path, written: list[Path], elapsed: flo
         print(f"  settling time       {_fmt(m.get('settling_time_s'), ' s')}")
     print(f"  final angle         {_fmt(m.get('final_value_rad'), ' rad')}")
     print(f"  cart speed change   {_fmt(m.get('cart_speed_change_m_s'), ' m/s')}")
+    if "max_abs_x_m" in m:
+        print(f"  largest |x|         {_fmt(m.get('max_abs_x_m'), ' m')}")
+    if result.meta.get("swing_up"):
+        print(f"  swing-up            started {_fmt(m.get('swing_start_s'), ' s')}, caught {_fmt(m.get('catch_time_s'), ' s')}"
+              f" ({m.get('missed_catches', 0)} missed; the response above is measured from the catch)")
+    if result.meta.get("recentre"):
+        print(f"  re-centring         acted for {_fmt(m.get('recentre_time_s'), ' s')} in {len(m.get('recentre_intervals_s', []))} interval(s)")
+    for line in result.meta.get("mode_events", []):
+        print(f"  {line}")
     print(f"results in {out_dir}/ ({', '.join(p.name for p in written)}) after {elapsed:.1f} s")
