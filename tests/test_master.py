@@ -148,13 +148,14 @@ def test_supervisor_pause_and_start_act_at_their_steps(loop_fmus, native):
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
 def test_events_at_the_same_point_all_apply(loop_fmus, native):
     """Two events at one communication point (one of them off the grid) on two components."""
-    events = (Event(0.5, "controller.r", 0.01), Event(0.4995, "supervisor.command", COMMANDS["pause"]))
-    record = ["controller.r", "controller.e", "plant.alpha_measured", "supervisor.command", "supervisor.state"]
+    # (controller.r is the supervisor's output now: the other event sets the supervisor's free input iteration.)
+    events = (Event(0.5, "supervisor.iteration", 7), Event(0.4995, "supervisor.command", COMMANDS["pause"]))
+    record = ["controller.r", "controller.e", "plant.alpha_measured", "supervisor.command", "supervisor.state", "supervisor.iteration"]
     log = run(loop_system(), 0.6, record, native, events=events)
-    assert np.flatnonzero(log["controller.r"]).tolist() == [500]
+    assert np.flatnonzero(log["supervisor.iteration"]).tolist() == [500]
     assert np.flatnonzero(log["supervisor.command"]).tolist() == [500]
     assert log["supervisor.state"][499] == RUNNING and log["supervisor.state"][500] == PAUSED
-    # r enters the controller's error e = r - Lp*alpha_measured in the same step, and only there.
+    # The controller's error is e = r - Lp*alpha_measured (r = 0 from the supervisor: re-centring is off).
     Lp = PlantParameters.preset().Lp
     np.testing.assert_allclose(log["controller.e"], log["controller.r"] - Lp * log["plant.alpha_measured"], rtol=0, atol=1e-15)
 

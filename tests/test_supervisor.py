@@ -507,5 +507,5 @@ def test_other_bad_parameters_are_errors(make, parameters, word):
 
 
 def test_python_codes_name_every_output_code():
-    assert sorted(STATES) == list(range(6)) and sorted(TRIP_REASONS) == list(range(5))
+    assert sorted(STATES) == list(range(7)) and sorted(TRIP_REASONS) == list(range(7))
     assert set(COMMANDS.values()) == set(range(5))

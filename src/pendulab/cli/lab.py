@@ -37,6 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--port", required=True, metavar="PORT", help="the rig's serial port or pyserial URL (COM3, /dev/ttyACM0, socket://HOST:PORT)")
     parser.add_argument("--baud", type=int, default=1_000_000, metavar="BAUD", help="baud rate (default 1000000)")
     add_controller_options(parser)
+    from pendulab.cli.options import add_mode_options
+
+    add_mode_options(parser, start=False)
     add_plant_options(parser)
     parser.add_argument("--delay", type=int, metavar="N", help="transport delay in periods (default: measured at connection)")
     parser.add_argument("--max-delay", type=int, default=DEFAULT_MAX_DELAY, metavar="N", help=f"largest delay to accept when measuring (default {DEFAULT_MAX_DELAY})")
@@ -92,6 +95,10 @@ def run(args: argparse.Namespace) -> int:
         # The controller is realized before anything moves: a controller the rules refuse never enables the motor.
         lti = discretize(controller, h=period, method=args.method)
         supervisor = {"rig_mode": True, "auto_start": False}
+        if args.recentre:
+            supervisor["recentre"] = True
+        if args.swing_up:
+            supervisor["swing_up"] = True
         system = pendulum_system(params, lti.to_parameters(), step=period, supervisor=supervisor)
         from pendulab.hil.realtime import raise_priority
 
@@ -114,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
                                  priority=priority)
             reason, status = session.run()
     meta = {
+        "recentre": bool(args.recentre),
+        "swing_up": bool(args.swing_up),
         "controller": getattr(controller, "describe", lambda: str(controller))(),
         "discretization": args.method,
         "step": period,

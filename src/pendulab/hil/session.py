@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import gc
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,7 +37,8 @@ RIG_ADAPTERS: dict[tuple[str, str], Callable[[float], float]] = {
     ("plant.alpha_measured", "controller.alpha_measured"): rig_to_upright,
 }
 #: Streamed log columns (rig_log.csv).
-LOG_COLUMNS = ("t", "tick", "x", "theta", "alpha", "voltage_command", "voltage", "supervisor_state", "status", "latency_ms", "late")
+LOG_COLUMNS = ("t", "tick", "x", "theta", "alpha", "voltage_command", "voltage", "supervisor_state", "status", "latency_ms", "late",
+               "reference", "recentring")
 #: No sample for this long: ask the rig who it is; no answer: the link is lost.
 SILENCE = 0.25
 
@@ -154,7 +156,7 @@ class LabSession:
             ])
             needed = [c.source_variable for c in self.system.connections if c.source == name]
             if name == "supervisor":
-                needed += ["state", "trip_reason", "motor_enable"]
+                needed += ["state", "trip_reason", "motor_enable", "r", "recentring", "misses"]
             needed = list(dict.fromkeys(needed))
             out = inst.port(needed)
             self.outputs[name] = (out, [(f"{name}.{var}", *out.index(var)) for var in needed])
@@ -163,6 +165,16 @@ class LabSession:
             raise UserError("the lab's wiring needs exactly one connection into plant.V")
         self.voltage_source = f"{to_rig[0].source}.{to_rig[0].source_variable}"
         self.command_port = master.instances["supervisor"].port(["command"])
+
+    def _initial_outputs(self, master: Master) -> dict[str, float]:
+        """Every component's outputs after initialization (its inputs at their start values)."""
+        values: dict[str, float] = {}
+        for name in self.order:
+            out, slots = self.outputs[name]
+            master.instances[name].read(out)
+            for path, t, i in slots:
+                values[path] = out.values[t][i]
+        return values
 
     def _evaluate(self, master: Master, values: dict[str, float]) -> None:
         for name in self.order:
@@ -204,9 +216,14 @@ class LabSession:
             gc.freeze()
             gc.disable()
             link.stream(True)
-            self.announce("streaming: press s to start, p to pause, e to end (r re-arms after a trip); "
-                          "raise the pendulum by hand, the controller takes it inside the capture window")
-            values: dict[str, float] = {}
+            swing_up = bool(self.system.components["supervisor"].start_values.get("swing_up"))
+            self.announce("streaming: press s to start, p to pause, e to end (r re-arms after a trip); " + (
+                "s swings the pendulum up from hanging, the controller takes it inside the catch window" if swing_up else
+                "raise the pendulum by hand, the controller takes it inside the capture window"))
+            # Inputs fed by a component evaluated later (the supervisor's r and engagement of the controller)
+            # take that component's outputs of the previous sample; before the first, its outputs now.
+            values: dict[str, float] = self._initial_outputs(master)
+            recentring = False
             state = -1
             first_tick: int | None = None
             prev_tick: int | None = None
@@ -260,11 +277,19 @@ class LabSession:
                 new_state = int(values["supervisor.state"])
                 alpha = rig_to_upright(theta)
                 log.append((t, sample.tick, x, theta, alpha, values["controller.V_command"], sample.voltage_mv / 1000.0,
-                            new_state, sample.status, (sent - received) * 1e3, sample.late))
+                            new_state, sample.status, (sent - received) * 1e3, sample.late, values["supervisor.r"],
+                            int(values["supervisor.recentring"])))
+                if bool(values["supervisor.recentring"]) != recentring:
+                    recentring = not recentring
+                    self.announce(f"[{t:8.3f} s] re-centring {'engaged' if recentring else 'released'} (x = {x:+.3f} m)")
                 if new_state != state:
                     why = ""
                     if STATES.get(new_state) == "tripped":
                         why = f" ({TRIP_REASONS.get(int(values['supervisor.trip_reason']), '?')})"
+                    if STATES.get(state) == "swinging up" and new_state == RUNNING:
+                        why = f" (caught at x = {x:+.3f} m, alpha = {math.degrees(alpha):+.1f} deg)"
+                    elif state == RUNNING and STATES.get(new_state) == "swinging up":
+                        why = f" (catch missed: {int(values['supervisor.misses'])} so far)"
                     self.announce(f"[{t:8.3f} s] {STATES.get(new_state, new_state)}{why}")
                     if state == RUNNING and new_state != RUNNING:
                         # The controller starts from a reset state each time it engages.
@@ -354,6 +379,7 @@ def rig_columns(log_path: Path, Lp: float) -> dict[str, np.ndarray]:
         "voltage": np.asarray(data["voltage"], dtype=float),
         "supervisor_state": np.asarray(data["supervisor_state"], dtype=float),
         "latency_ms": np.asarray(data["latency_ms"], dtype=float),
+        **{name: np.asarray(data[name], dtype=float) for name in ("reference", "recentring") if name in (data.dtype.names or ())},
     }
 
 
@@ -412,6 +438,14 @@ def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: d
     metrics["poke_start_detected_s"] = poke
     metrics["end_reason"] = session.reason
     meta = {**meta, "end_reason": session.reason, "source": "rig", "delay": session.link.delay}
+    if meta.get("recentre") or meta.get("swing_up"):
+        from pendulab.analysis.modes import mode_events, mode_metrics
+
+        metrics.update(mode_metrics(t, columns["supervisor_state"], recentring=columns.get("recentring"), x=columns["x"]))
+        meta["mode_events"] = mode_events(t, columns["supervisor_state"], recentring=columns.get("recentring"))
+    else:  # the run's files as before the modes existed
+        columns.pop("reference", None)
+        columns.pop("recentring", None)
     write_results(session.out_dir, columns, meta, metrics)
     timing = session.timing.summary(session.link.delay, session.period, round_trips)
     timing["host_scheduling"] = session.priority

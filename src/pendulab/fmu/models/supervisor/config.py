@@ -200,7 +200,7 @@ def _mode_variables() -> list[Variable]:
         real("pendulum_frequency", math.sqrt(0.230 * 9.81 * 0.3302 / (7.884e-3 + 0.230 * 0.3302**2)), "rad/s",
              "Small-swing frequency of the hanging pendulum, sqrt(Mp*g*lp/(Ip+Mp*lp^2)): scales the energy"),
         real("swing_energy_gain", 60.0, "m/s2", "Swing-up law: cart acceleration per unit of missing energy (Astrom-Furuta)"),
-        real("swing_energy_target", 0.0, "1", "Energy the swing-up aims at, over Mp*g*lp (0: just reaching upright)"),
+        real("swing_energy_target", 0.02, "1", "Energy the swing-up aims at, over Mp*g*lp (0 would only creep up to upright; a little more passes through the catch window)"),
         real("swing_accel_max", 3.0, "m/s2", "Largest cart acceleration the swing-up asks for"),
         real("swing_speed_max", SWING_SPEED_MAX, "m/s", "Largest speed of the cart's set point while swinging up"),
         real("swing_travel", 0.20, "m", "The cart's set point stays within +-swing_travel while swinging up"),
