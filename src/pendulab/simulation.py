@@ -22,6 +22,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from pendulab.errors import UserError
 from pendulab.spec import RunSpec
 
 
@@ -159,6 +160,10 @@ def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None) -> 
     supervisor = spec.supervisor_parameters()
     if spec.controller.fmu is not None:
         from pendulab.blocks.loop import block_controller_system
+
+        if spec.initial_state():
+            raise UserError("a pendulum that starts hanging needs a G(s) controller (the Controller FMU); "
+                            "a controller block starts upright")
 
         return block_controller_system(spec.controller.fmu, params, step=timing.step, supervisor=supervisor,
                                        controller_parameters=dict(spec.controller.parameters), fmu_dir=fmu_dir,
