@@ -277,3 +277,26 @@ def test_opens_the_browser_at_its_address(tmp_path):
     finally:
         process.terminate()
         process.wait(timeout=10)
+
+
+def test_the_supervisor_mode_switches_reach_the_run(tmp_path):
+    """Issue 21: the page's re-centring and swing-up switches run the same modes as simulate --recentre --swing-up."""
+    import queue
+
+    import scipy.io
+
+    from pendulab.gui.worker import run_simulation
+
+    form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "8",
+            "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}, "recentre": True, "swing_up": True}
+    settings = run_settings(form, None, "default")
+    assert settings.supervisor == {"recentre": True, "swing_up": True} and settings.start == "hanging"
+    assert run_settings({**form, "recentre": False, "swing_up": False}, None, "default").supervisor == {}
+    q = queue.Queue()
+    run_simulation(settings, str(tmp_path / "run"), q)
+    messages = [q.get_nowait() for _ in range(q.qsize())]
+    assert messages[-1] == ("done", None), messages
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["swing_start_s"] == 0.0 and 0 < metrics["catch_time_s"] < 8
+    meta = scipy.io.loadmat(tmp_path / "run" / "run.mat", squeeze_me=True, struct_as_record=False)["meta"]
+    assert meta.recentre and meta.swing_up and meta.start == "hanging"

@@ -144,6 +144,7 @@ def simulate_poke(
     fmu_dir: Path | None = None,
     progress: Callable[[float], None] | None = None,
     delay: int = 0,
+    start: str = "upright",
 ) -> SimulationResult:
     """Simulate the loop with a poke: :func:`pendulab.simulate` of the spec these arguments describe.
 
@@ -155,6 +156,8 @@ def simulate_poke(
         Default: long pendulum, IP02 cart, the lab's friction; the poke is part of the parameters.
     delay : int, optional
         Transport delay of N control periods before the plant's voltage input, as on the rig.
+    start : {"upright", "hanging"}
+        The pendulum at t = 0 (hanging: with ``supervisor={"swing_up": True}``).
     """
     from pendulab.simulation import simulate
     from pendulab.spec import RunSpec, Supervisor, Timing
@@ -162,6 +165,10 @@ def simulate_poke(
     spec = RunSpec.for_parameters(controller, params or PlantParameters.preset(),
                                   timing=Timing(stop_time=stop_time, step=step, method=method, delay=delay),
                                   supervisor=Supervisor(**dict(supervisor or {})))
+    if start != "upright":
+        from dataclasses import replace
+
+        spec = spec.replace(plant=replace(spec.plant, start=start))
     result = simulate(spec, progress=progress, events=events, fmu_dir=fmu_dir)
     for key in ("pendulum", "cart", "calibration"):  # not known from the parameters alone
         result.meta.pop(key)

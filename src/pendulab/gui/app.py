@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -37,6 +37,9 @@ class RunSettings:
     method: str
     delay: int
     meta: dict[str, Any]
+    #: The supervisor's modes (issue 21): ``recentre``, ``swing_up``; a swing-up starts hanging.
+    supervisor: dict[str, Any] = field(default_factory=dict)
+    start: str = "upright"
 
 
 def _text(form: Mapping[str, Any], key: str) -> str:
@@ -122,7 +125,13 @@ def run_settings(form: Mapping[str, Any], calibration_path: str | None, calibrat
     if not form.get("quantization", True):
         params = params.with_values(q_alpha=0.0, q_x=0.0)
     meta = {"pendulum": _text(form, "pendulum") or "long", "cart": _text(form, "cart") or "ip02", "calibration": calibration_label, "source": "simulation"}
-    return RunSettings(controller, params, stop_time, step, method, delay, meta)
+    supervisor: dict[str, Any] = {}
+    if form.get("recentre"):
+        supervisor["recentre"] = True
+    if form.get("swing_up"):
+        supervisor["swing_up"] = True
+    return RunSettings(controller, params, stop_time, step, method, delay, meta, supervisor,
+                       "hanging" if supervisor.get("swing_up") else "upright")
 
 
 def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[str, Any]:

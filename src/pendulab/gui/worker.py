@@ -37,6 +37,8 @@ def run_simulation(settings: Any, folder: str, queue: Any) -> None:
                 meta=settings.meta,
                 progress=progress,
                 delay=settings.delay,
+                supervisor=settings.supervisor,
+                start=settings.start,
             )
         except SimulationError as exc:
             raise UserError(f"the simulation failed: {exc}; check the controller, the poke and the parameters") from None

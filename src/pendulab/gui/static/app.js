@@ -108,6 +108,7 @@ function readForm() {
     poke: { magnitude: $("poke-mag").value, duration: $("poke-dur").value, start: $("poke-start").value },
     stop_time: $("stop-time").value, step: $("step").value, method: $("method").value,
     delay: $("delay").value, quantization: $("quantization").checked,
+    recentre: $("recentre").checked, swing_up: $("swing-up").checked,
   };
 }
 
