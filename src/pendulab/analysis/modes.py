@@ -87,4 +87,4 @@ def mode_events(t: Any, state: Any, *, recentring: Any = None) -> list[str]:
             events.append((start, "re-centring engaged"))
             if end < t[-1]:
                 events.append((end, "re-centring released"))
-    return [f"t={when:.3f} s: {text}" for when, text in sorted(events)]
+    return [f"t={when:.3f} s: {text}" for when, text in sorted(events, key=lambda e: e[0])]
