@@ -104,7 +104,7 @@ class SeesawParameters:
         math.radians(11.5), "rad", "Tilt end stops: the seesaw rests on the floor at +/- this tilt", positive=True
     )
     # tap: a rectangular pulse added to the tilt's angular acceleration
-    tap_magnitude: float = _p(3.0, "rad/s2", "Tap magnitude", minimum=-math.inf)
+    tap_magnitude: float = _p(3.3, "rad/s2", "Tap magnitude (3.3 for 0.1 s tilts the seesaw about 5 deg under Quanser's LQR)", minimum=-math.inf)
     tap_duration: float = _p(0.1, "s", "Tap duration")
     tap_start: float = _p(1.0, "s", "Tap start time")
 
