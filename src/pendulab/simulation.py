@@ -101,6 +101,10 @@ def simulate(
     mode_recorded = tuple(MODE_COLUMNS) if modes else ()
 
     spec.validate()
+    if spec.plant.kind == "seesaw":
+        from pendulab.cosim.seesaw import simulate_seesaw
+
+        return simulate_seesaw(spec, progress=progress, events=events, record=record, meta=meta, fmu_dir=fmu_dir)
     params = spec.parameters()
     timing = spec.timing
     block = spec.controller.fmu
@@ -191,12 +195,14 @@ def run_meta(spec: RunSpec, params: Any) -> dict[str, Any]:
     meta: dict[str, Any] = {"controller": spec.describe_controller()}
     if spec.controller.fmu is None:
         meta["discretization"] = spec.timing.method
+    if spec.plant.kind != "pendulum":
+        meta["plant"] = spec.plant.kind
     meta.update(
         step=spec.timing.step,
         delay=spec.timing.delay,
         parameters=params.as_dict(),
         version=__version__,
-        pendulum=spec.plant.pendulum,
+        pendulum=spec.plant.pendulum if spec.plant.kind == "pendulum" else "none",
         cart=spec.plant.cart,
         calibration=spec.plant.calibration or "default",
         run=spec.to_json(),

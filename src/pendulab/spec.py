@@ -41,7 +41,7 @@ from typing import Any, Mapping
 from pendulab.errors import UserError
 
 #: Plants a run can name (``plant.kind``).
-PLANT_KINDS = ("pendulum",)
+PLANT_KINDS = ("pendulum", "seesaw")
 #: Discretizations of the controller (``timing.method``).
 METHODS = ("tustin", "zoh")
 #: The poke of a run that names none: 50 rad/s^2 for 5 ms from t = 1 s (SPEC §2).
@@ -113,6 +113,9 @@ class ControllerSpec:
         period.
     fmu : str, optional
         A controller block FMU (e.g. built with :func:`pendulab.blocks.build_block`) instead.
+    state_feedback : StateFeedbackDesign, optional
+        An LQR state feedback (:func:`pendulab.control.state_feedback.design_state_feedback`, or a
+        ``pendulab lqr --out`` file), run in the Controller FMU with its derivative filters and integral.
     parameters : mapping
         Start values of the block FMU's parameters.
     label : str, optional
@@ -121,6 +124,7 @@ class ControllerSpec:
 
     transfer_function: Any = None
     fmu: str | None = None
+    state_feedback: Any = None
     parameters: Mapping[str, float] = _mapping_field()
     label: str | None = None
 
@@ -271,6 +275,10 @@ class RunSpec:
             controller = ControllerSpec(transfer_function=_as_controller(controller))
         elif controller.transfer_function is not None:
             controller = dataclasses.replace(controller, transfer_function=_as_controller(controller.transfer_function))
+        if controller.state_feedback is not None and isinstance(controller.state_feedback, Mapping):
+            from pendulab.control.state_feedback import design_from_table
+
+            controller = dataclasses.replace(controller, state_feedback=design_from_table(controller.state_feedback, "controller.state_feedback"))
         object.__setattr__(self, "controller", controller)
         for name, cls in SECTIONS.items():
             value = getattr(self, name)
@@ -298,8 +306,14 @@ class RunSpec:
                 f"the poke starts at t={p.start:g} s, not before the stop time {t.stop_time:g} s; start the poke earlier or lengthen --stop-time"
             )
         c = self.controller
-        if (c.transfer_function is None) == (c.fmu is None):
-            raise UserError("a run needs one controller: a transfer function (kernel and compensators) or a controller block FMU")
+        if sum(x is not None for x in (c.transfer_function, c.fmu, c.state_feedback)) != 1:
+            raise UserError("a run needs one controller: a transfer function (kernel and compensators), a state feedback or a controller block FMU")
+        if self.plant.kind == "seesaw" and c.state_feedback is None:
+            raise UserError("the seesaw runs a state feedback: design one with 'pendulab lqr --plant seesaw --out FILE' "
+                            "and give it with --controller FILE (or --demo)")
+        if c.state_feedback is not None and c.state_feedback.plant != self.plant.kind:
+            raise UserError(f"the controller is a state feedback for the {c.state_feedback.plant}, but the run's plant is the "
+                            f"{self.plant.kind}; design one for the {self.plant.kind} with 'pendulab lqr --plant {self.plant.kind}'")
         if c.fmu is not None and not Path(c.fmu).is_file():
             raise UserError(f"controller FMU {c.fmu} does not exist; build it with pendulab.blocks.build_block")
         if self.plant.start == "hanging" and not self.supervisor.swing_up:
@@ -316,6 +330,8 @@ class RunSpec:
         from pendulab.model.parameters import PlantParameters
 
         plant = self.plant
+        if plant.kind == "seesaw":
+            return self._seesaw_parameters()
         params = PlantParameters.preset(pendulum=plant.pendulum, cart=plant.cart)
         if plant.calibration:
             from pendulab.calibration.files import load_calibration
@@ -332,6 +348,29 @@ class RunSpec:
             if steps:
                 params = params.with_values(**steps)
         return params
+
+    def _seesaw_parameters(self) -> Any:
+        """The seesaw's :class:`~pendulab.model.seesaw.SeesawParameters`: its defaults (the IP02 cart without
+        its weight), the calibration, the overrides, the poke as the tap, the quantization (``q_alpha`` is
+        the tilt encoder's step)."""
+        from pendulab.model.seesaw import SeesawParameters
+
+        plant = self.plant
+        if plant.cart != "ip02":
+            raise UserError(f"the seesaw carries the IP02 cart without its weight; --cart {plant.cart} is not a seesaw configuration")
+        params = SeesawParameters()
+        if plant.calibration:
+            from pendulab.calibration.files import load_calibration
+
+            params = params.with_values(**load_calibration(plant.calibration).values)
+        if plant.overrides:
+            params = params.with_values(**plant.overrides)
+        params = params.with_values(tap_magnitude=self.poke.magnitude, tap_duration=self.poke.duration, tap_start=self.poke.start)
+        q = self.quantization
+        if not q.enabled:
+            return params.with_values(q_theta=0.0, q_x=0.0)
+        steps = {k: v for k, v in (("q_theta", q.q_alpha), ("q_x", q.q_x)) if v is not None}
+        return params.with_values(**steps) if steps else params
 
     def supervisor_parameters(self) -> dict[str, Any]:
         """Start values for the Supervisor FMU: the settings given (not ``None``; a mode only when it is on),
@@ -355,6 +394,8 @@ class RunSpec:
             return c.label
         if c.fmu is not None:
             return f"Python block {Path(c.fmu).name}"
+        if c.state_feedback is not None:
+            return c.state_feedback.describe()
         describe = getattr(c.transfer_function, "describe", None)
         return describe() if callable(describe) else str(c.transfer_function)
 
@@ -382,6 +423,8 @@ class RunSpec:
                     value = dict(value)
                 elif name == "controller" and f.name == "transfer_function":
                     value = value.to_dict() if value is not None else None
+                elif name == "controller" and f.name == "state_feedback":
+                    value = value.to_dict()["state_feedback"] if value is not None else None
                 table[f.name] = value
             out[name] = table
         return out

@@ -94,6 +94,19 @@ _PANELS = (
     ),
 )
 
+#: The seesaw's angle panel (its runs have ``theta`` instead of ``alpha``, and no tip).
+_TILT_PANEL = _Panel(
+    "angle.png",
+    "Seesaw tilt",
+    "tilt θ (deg)",
+    lambda ax, t, c: _series(
+        ax, t, c,
+        [
+            ("theta", 180 / np.pi, "θ (true)", dict(color="C0", lw=1.6)),
+            ("theta_measured", 180 / np.pi, "θ measured (encoder)", dict(color="C1", lw=1.0, drawstyle="steps-post")),
+        ],
+    ),
+)
 
 #: The amplifier's range (V): the voltage panel is limited to it (PlantParameters.V_max).
 DEFAULT_VOLTAGE_LIMIT = 10.0
@@ -183,7 +196,10 @@ def run_figures(
         marks += [(when, "catch" if k == 0 else None, "C4", "-") for k, when in enumerate(moments["catch_times_s"])]
         spans = moments.get("recentre_intervals_s", [])
     start = poke_start if poke_start is not None else (float(t[0]) if t.size else 0.0)
-    panels = (_response_panel(start), *_PANELS[:-1], _voltage_panel(limit))
+    seesaw = "theta" in cols and "alpha" not in cols
+    angle = _TILT_PANEL if seesaw else _PANELS[0]
+    middle = (angle, _PANELS[2]) if seesaw else _PANELS[:-1]
+    panels = (_response_panel(start, angle), *middle, _voltage_panel(limit))
 
     fig = _figure((9.5, 11.0))
     axes = fig.subplots(len(panels), 1)
@@ -209,9 +225,8 @@ def run_figures(
     return figures
 
 
-def _response_panel(start: float) -> _Panel:
+def _response_panel(start: float, angle: _Panel = _PANELS[0]) -> _Panel:
     """The angle from the poke to RESPONSE_WINDOW after it (x range set by ``_draw_panel``)."""
-    angle = _PANELS[0]
 
     def draw(ax: Axes, t: np.ndarray, c: Mapping[str, np.ndarray]) -> bool:
         inside = (t >= start - 0.02 * RESPONSE_WINDOW) & (t <= start + RESPONSE_WINDOW)
@@ -221,7 +236,7 @@ def _response_panel(start: float) -> _Panel:
         ax.set_xlim(max(float(t[0]), start - 0.02 * RESPONSE_WINDOW), start + RESPONSE_WINDOW)
         return drawn
 
-    return _Panel("response.png", f"Response to the poke (first {RESPONSE_WINDOW:g} s)", "angle α (deg)", draw, own_xlim=True)
+    return _Panel("response.png", f"Response to the poke (first {RESPONSE_WINDOW:g} s)", angle.ylabel, draw, own_xlim=True)
 
 
 def _voltage_panel(limit: float) -> _Panel:

@@ -43,6 +43,8 @@ from pendulab.outputs import atomic_write, create_temporary, write_temporary as 
 
 #: The columns of every run file, in this order (SPEC §7).
 COLUMNS = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state")
+#: The seesaw's run columns (its runs have the tilt ``theta`` where the pendulum's have ``alpha``; no tip).
+SEESAW_COLUMNS = ("t", "x", "xdot", "theta", "theta_measured", "x_measured", "voltage_command", "voltage", "supervisor_state")
 #: The fields the ``meta`` struct always has (empty when not given).
 META_FIELDS = ("controller", "parameters", "calibration", "pendulum", "version")
 FILE_NAMES = {"mat": "run.mat", "csv": "run.csv", "metrics": "metrics.json"}
@@ -132,10 +134,11 @@ def write_results(
 
 
 def _column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
-    missing = [name for name in COLUMNS if name not in columns]
+    required = SEESAW_COLUMNS if "theta" in columns and "alpha" not in columns else COLUMNS
+    missing = [name for name in required if name not in columns]
     if missing:
-        raise ValueError(f"run columns lack {', '.join(missing)}; every run has {', '.join(COLUMNS)}")
-    names = list(COLUMNS) + [name for name in columns if name not in COLUMNS]
+        raise ValueError(f"run columns lack {', '.join(missing)}; every run has {', '.join(required)}")
+    names = list(required) + [name for name in columns if name not in required]
     arrays = []
     for name in names:
         if not _MATLAB_NAME.match(name):

@@ -21,8 +21,8 @@ True
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -57,7 +57,7 @@ class StateFeedbackDesign:
     plant : {"pendulum", "seesaw"}
     states : tuple of str
         The feedback vector's order (:func:`state_names`).
-    K : numpy.ndarray
+    K : tuple of float
         Gains, ``V = -K state``.
     closed_loop_poles : numpy.ndarray
         Eigenvalues of ``A - B K`` of the continuous linear model.
@@ -66,10 +66,10 @@ class StateFeedbackDesign:
 
     plant: str
     states: tuple[str, ...]
-    K: np.ndarray
-    closed_loop_poles: np.ndarray
-    q: tuple[float, ...]
-    r: float
+    K: tuple[float, ...]
+    closed_loop_poles: np.ndarray = field(compare=False)
+    q: tuple[float, ...] = ()
+    r: float = math.nan
     filter_hz: float = FILTER_HZ
     filter_zeta: float = FILTER_ZETA
     integral_limit: float = INTEGRAL_LIMIT
@@ -77,6 +77,11 @@ class StateFeedbackDesign:
     @property
     def integral(self) -> bool:
         return len(self.states) == 5
+
+    def describe(self) -> str:
+        """One line: the law and its gains."""
+        gains = ", ".join(f"{k:.5g}" for k in self.K)
+        return f"LQR state feedback V = -K [{', '.join(self.states)}], K = [{gains}]"
 
     def to_dict(self) -> dict:
         """The design as a controller file's ``[state_feedback]`` table."""
@@ -172,7 +177,8 @@ def design_state_feedback(
     except Exception as exc:  # an undetectable or unstabilizable weighting
         raise UserError(f"no LQR solution for Q = diag({', '.join(f'{v:g}' for v in q)}), R = {r:g}: {exc}; weight the angle and x") from None
     poles = np.asarray(poles)
-    return StateFeedbackDesign(plant, names, np.ravel(np.asarray(K)), poles[np.lexsort((poles.imag, poles.real))], q, r)
+    gains = tuple(float(k) for k in np.ravel(np.asarray(K)))
+    return StateFeedbackDesign(plant, names, gains, poles[np.lexsort((poles.imag, poles.real))], q, r)
 
 
 def save_state_feedback_file(design: StateFeedbackDesign, path: str) -> None:
@@ -226,20 +232,39 @@ def load_state_feedback_file(path: str) -> StateFeedbackDesign:
     table = data.get("state_feedback")
     if not isinstance(table, dict):
         raise UserError(f"controller file {path} has no [state_feedback] table; write one with 'pendulab lqr --out FILE'")
+    return design_from_table(table, f"controller file {path}")
+
+
+def design_from_table(table: Any, source: str = "state feedback") -> StateFeedbackDesign:
+    """A design from its ``[state_feedback]`` table (:meth:`StateFeedbackDesign.to_dict`).
+
+    Raises
+    ------
+    UserError
+        A missing entry, or states and gains that do not fit the plant.
+    """
+    if not isinstance(table, Mapping):
+        raise UserError(f"{source} must be a table with plant, states and K")
     try:
-        plant, K = table["plant"], [float(k) for k in table["K"]]
+        plant, K = table["plant"], tuple(float(k) for k in table["K"])
         states = tuple(str(s) for s in table["states"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise UserError(f"controller file {path}: [state_feedback] needs plant, states and K ({exc})") from None
+        raise UserError(f"{source}: [state_feedback] needs plant, states and K ({exc})") from None
     if plant not in PLANTS or states != state_names(plant, len(states) == 5) or len(K) != len(states):
-        raise UserError(f"controller file {path}: states {list(states)} and K of length {len(K)} do not fit the {plant}")
+        raise UserError(f"{source}: states {list(states)} and K of length {len(K)} do not fit the {plant}")
     if not all(math.isfinite(k) for k in K):
-        raise UserError(f"controller file {path}: every gain in K must be finite")
-    q = tuple(float(v) for v in table.get("q", ()))
+        raise UserError(f"{source}: every gain in K must be finite")
+    numbers = {}
+    for key, default in (("derivative_filter_hz", FILTER_HZ), ("derivative_filter_zeta", FILTER_ZETA), ("integral_limit", INTEGRAL_LIMIT)):
+        try:
+            numbers[key] = float(table.get(key, default))
+        except (TypeError, ValueError):
+            raise UserError(f"{source}: {key} must be a number") from None
+        if not (math.isfinite(numbers[key]) and numbers[key] > 0):
+            raise UserError(f"{source}: {key} = {numbers[key]:g} must be a finite number > 0")
     return StateFeedbackDesign(
-        plant, states, np.asarray(K), np.asarray([]), q, float(table.get("r", math.nan)),
-        float(table.get("derivative_filter_hz", FILTER_HZ)), float(table.get("derivative_filter_zeta", FILTER_ZETA)),
-        float(table.get("integral_limit", INTEGRAL_LIMIT)),
+        plant, states, K, np.asarray([]), tuple(float(v) for v in table.get("q", ())), float(table.get("r", math.nan)),
+        numbers["derivative_filter_hz"], numbers["derivative_filter_zeta"], numbers["integral_limit"],
     )
 
 
@@ -277,6 +302,26 @@ class StateFeedbackRealization:
     @property
     def order(self) -> int:
         return int(self.A.shape[0])
+
+    def to_parameters(self) -> dict[str, float | int]:
+        """Start values of the Controller FMU (its two-input form).
+
+        The FMU's first input is the error ``e = r - Lp * alpha_measured``: with ``Lp = -1`` and ``r = 0``
+        it is the measured angle itself; ``x_measured`` is the second input.
+        """
+        n = self.order
+        out: dict[str, float | int] = {"n": n, "Lp": -1.0, "h": self.h}
+        for i in range(n):
+            for j in range(n):
+                out[f"A[{i + 1},{j + 1}]"] = float(self.A[i, j])
+        for i in range(n):
+            out[f"B[{i + 1}]"] = float(self.B[i, 0])
+            out[f"B_x[{i + 1}]"] = float(self.B[i, 1])
+            out[f"C[{i + 1}]"] = float(self.C[0, i])
+        out["D"], out["D_x"] = float(self.D[0, 0]), float(self.D[0, 1])
+        out["integral_index"] = self.integral_index
+        out["integral_limit"] = float(self.integral_limit)
+        return out
 
 
 def realize_state_feedback(design: StateFeedbackDesign, h: float = 1e-3, method: str = "tustin") -> StateFeedbackRealization:

@@ -20,6 +20,8 @@ def spec() -> ModelSpec:
     variables = [
         Variable("alpha_measured", "Real", "input", start=0.0, unit="rad", description="Measured pendulum angle from upright"),
         Variable("r", "Real", "input", start=0.0, unit="m", description="Tip position reference (0 in the lab)"),
+        Variable("x_measured", "Real", "input", start=0.0, unit="m",
+                 description="Measured cart position: the second input of a state feedback (unused by a transfer function G(s))"),
         Variable("V_command", "Real", "output", unit="V", description="Voltage command, C x + D e", initial="calculated"),
         Variable("e", "Real", "output", unit="m", description="Tip position error r - Lp*alpha_measured", initial="calculated"),
         Variable("Lp", "Real", "parameter", start=0.6413, unit="m", description="Pendulum length: the tip position is Lp*alpha", initial="exact"),
@@ -33,6 +35,11 @@ def spec() -> ModelSpec:
     ]
     variables += [Variable(f"B[{i}]", "Real", "parameter", start=0.0, description=f"Input matrix entry {i}", initial="exact") for i in range(1, n + 1)]
     variables += [Variable(f"C[{i}]", "Real", "parameter", start=0.0, unit="V", description=f"Output matrix entry {i}", initial="exact") for i in range(1, n + 1)]
+    # The second input, x_measured (state feedback: the seesaw's cart position); zero for a SISO G(s).
+    variables.append(Variable("D_x", "Real", "parameter", start=0.0, unit="V/m", description="Feedthrough of x_measured", initial="exact"))
+    variables += [Variable(f"B_x[{i}]", "Real", "parameter", start=0.0, description=f"Input matrix entry {i} of x_measured", initial="exact") for i in range(1, n + 1)]
+    variables.append(Variable("integral_limit", "Real", "parameter", start=0.0,
+                              description="Limit of the integral state (state feedback's integral; Quanser's seesaw: 10 deg)", initial="exact"))
     variables.append(Variable("n", "Integer", "parameter", start=0, description=f"Controller order (0..{n})", initial="exact"))
     variables += [
         Variable("engaged", "Boolean", "input", start=True,
@@ -40,6 +47,8 @@ def spec() -> ModelSpec:
         Variable("wrap_angle", "Boolean", "parameter", start=False, initial="exact",
                  description="Wrap alpha_measured into (-pi, pi] (a pendulum that may turn over, as in a swing-up)"),
     ]
+    variables.append(Variable("integral_index", "Integer", "parameter", start=0,
+                              description=f"1-based index of the state held within +/-integral_limit (0: none)", initial="exact"))
     return ModelSpec(
         identifier="Controller",
         description="Student controller: discrete linear time-invariant block x+ = A x + B e, V = C x + D e, e = r - Lp*alpha",

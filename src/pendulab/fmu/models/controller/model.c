@@ -24,6 +24,11 @@ Status model_initialize(Instance *comp) {
         fmu_log(comp, Error, "logStatusError", "controller order n=%d must be within 0..%d", n, MAX_ORDER);
         return Error;
     }
+    if (comp->i[VR_integral_index] < 0 || comp->i[VR_integral_index] > n || !(comp->r[VR_integral_limit] >= 0)) {
+        fmu_log(comp, Error, "logStatusError", "integral_index=%d must be within 0..n=%d and integral_limit=%g >= 0",
+                comp->i[VR_integral_index], n, comp->r[VR_integral_limit]);
+        return Error;
+    }
     if (!(comp->r[VR_h] > 0)) {
         fmu_log(comp, Error, "logStatusError", "sample period h=%g must be positive", comp->r[VR_h]);
         return Error;
@@ -53,6 +58,7 @@ void model_update_outputs(Instance *comp) {
     const double *C = &comp->r[VR_C_1];
     double e = error_signal(comp), y = comp->r[VR_D] * e;
     int k, n = comp->i[VR_n];
+    y += comp->r[VR_D_x] * comp->r[VR_x_measured];  /* 0 for a SISO G(s): adding +0.0 changes no value */
     for (k = 0; k < n; k++) y += C[k] * w->x[k];
     comp->r[VR_e] = e;
     comp->r[VR_V_command] = y;
@@ -60,9 +66,9 @@ void model_update_outputs(Instance *comp) {
 
 Status model_do_step(Instance *comp, double t, double h) {
     Work *w = (Work *)comp->work;
-    const double *A = &comp->r[VR_A_1_1], *B = &comp->r[VR_B_1];
-    double e = error_signal(comp);
-    int i, j, n = comp->i[VR_n];
+    const double *A = &comp->r[VR_A_1_1], *B = &comp->r[VR_B_1], *Bx = &comp->r[VR_B_x_1];
+    double e = error_signal(comp), xm = comp->r[VR_x_measured];
+    int i, j, n = comp->i[VR_n], held = comp->i[VR_integral_index];
     (void)t;
     /* The matrices hold for one sample period only: another step size would silently change the controller. */
     if (fabs(h - comp->r[VR_h]) > 1e-9 + 1e-6 * comp->r[VR_h]) {
@@ -75,8 +81,14 @@ Status model_do_step(Instance *comp, double t, double h) {
     }
     for (i = 0; i < n; i++) {
         double s = B[i] * e;
+        s += Bx[i] * xm;  /* 0 for a SISO G(s) */
         for (j = 0; j < n; j++) s += A[i * MAX_ORDER + j] * w->x[j];
         w->next[i] = s;
+    }
+    if (held > 0) {  /* a state feedback's integral, limited as in Quanser's lab */
+        double limit = comp->r[VR_integral_limit];
+        if (w->next[held - 1] > limit) w->next[held - 1] = limit;
+        if (w->next[held - 1] < -limit) w->next[held - 1] = -limit;
     }
     memcpy(w->x, w->next, (size_t)n * sizeof(double));
     return OK;

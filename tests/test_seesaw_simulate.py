@@ -1,0 +1,110 @@
+"""The seesaw through the pipeline: ``pendulab simulate --plant seesaw`` (issue 20, build 4 and must-show 2)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+import pendulab
+from pendulab.cli.main import main
+from pendulab.control.state_feedback import design_state_feedback, realize_state_feedback
+from pendulab.cosim.seesaw import seesaw_spec
+from pendulab.model.seesaw import SeesawModel
+from pendulab.spec import Poke, Timing
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, Path]:
+    out = tmp_path_factory.mktemp("seesaw") / "demo"
+    import contextlib
+    import io
+
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer):
+        status = main(["simulate", "--plant", "seesaw", "--demo", "--out", str(out), "--plot"])
+    return status, buffer.getvalue(), out
+
+
+def test_quanser_s_lqr_holds_the_seesaw_level_after_a_5_degree_tap(demo) -> None:
+    status, printed, out = demo
+    assert status == 0 and printed.startswith("STABLE: the seesaw stayed level")
+    run = scipy.io.loadmat(out / "run.mat")
+    t, theta, x = run["t"].ravel(), run["theta"].ravel(), run["x"].ravel()
+    after_tap = t >= 1.0
+    peak = np.degrees(np.abs(theta[after_tap]).max())
+    assert 4.0 < peak < 6.5  # the tap: about 5 degrees
+    # Settled: within 2 degrees from 3 s after the tap on (the issue's bar; measured 0.44 deg).
+    assert np.degrees(np.abs(theta[t >= 4.0]).max()) < 2.0
+    assert np.abs(x).max() < 0.35 and np.abs(run["voltage"]).max() <= 10.0 + 1e-12
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["stable"] and metrics["safety_cut_time_s"] is None
+    meta = run["meta"][0, 0]
+    assert meta["plant"][0] == "seesaw"
+    assert {p.name for p in out.glob("*.png")} >= {"run.png", "angle.png", "cart.png", "voltage.png"}
+
+
+def test_the_loop_of_fmus_equals_a_python_loop_of_the_casadi_model_and_the_realized_controller() -> None:
+    """Seesaw.fmu + Controller.fmu + Supervisor.fmu against the model's own RK4 and the controller's matrices."""
+    h, stop = 1e-3, 0.8
+    spec = seesaw_spec(poke=Poke(3.3, 0.1, 0.1), timing=Timing(stop_time=stop))
+    result = pendulab.simulate(spec)
+    params = spec.parameters()
+    block = realize_state_feedback(design_state_feedback("seesaw"), h)
+    model, p = SeesawModel(), np.asarray(params.as_vector())
+    state, z = np.zeros(4), np.zeros(block.order)
+    thetas = [0.0]
+    for k in range(int(round(stop / h))):
+        theta_m, x_m = np.asarray(model.outputs(state, 0.0, p, k * h)).ravel()[:2]
+        u = np.array([theta_m, x_m])
+        V = (block.C @ z + block.D @ u).item()
+        z = block.A @ z + block.B @ u
+        z[block.integral_index - 1] = np.clip(z[block.integral_index - 1], -block.integral_limit, block.integral_limit)
+        for i in range(10):
+            state = np.asarray(model.rk4(state, V, p, k * h + i * h / 10, h / 10)).ravel()
+        thetas.append(state[2])
+    assert np.degrees(np.max(np.abs(thetas))) > 1.0
+    np.testing.assert_allclose(result.columns["theta"], thetas, rtol=1e-7, atol=1e-10)
+
+
+def test_the_run_s_meta_gives_the_spec_back(demo) -> None:
+    _, _, out = demo
+    from pendulab.spec import RunSpec
+
+    run = scipy.io.loadmat(out / "run.mat")
+    spec = RunSpec.from_json(str(run["meta"][0, 0]["run"][0]))
+    assert spec.plant.kind == "seesaw" and spec.controller.state_feedback == design_state_feedback("seesaw")
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--pid", "1,2,3"], "the seesaw runs a state feedback, not --pid"),
+        (["--zeros=-6", "--poles=6.4", "--gain", "45000"], "the seesaw runs a state feedback"),
+        (["--demo", "--recentre"], "the seesaw has none of them"),
+        (["--demo", "--pendulum", "short"], "the seesaw has none of them"),
+        (["--demo", "--cart", "ip01"], "not a seesaw configuration"),
+        ([], "needs one controller"),
+    ],
+)
+def test_bad_seesaw_runs_are_one_line_and_exit_2(capsys, tmp_path: Path, argv: list[str], words: str) -> None:
+    status = main(["simulate", "--plant", "seesaw", "--out", str(tmp_path / "out"), *argv])
+    out, err = capsys.readouterr()
+    assert status == 2 and len(err.strip().splitlines()) == 1 and words in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_pendulum_controller_file_given_to_the_seesaw_is_refused(capsys, tmp_path: Path) -> None:
+    kernel = tmp_path / "pendulum.toml"
+    kernel.write_text("[kernel]\nzeros = [-6]\npoles = [6.4]\ngain = 45000\n")
+    pendulum_lqr = tmp_path / "lqr.toml"
+    assert main(["lqr", "--plant", "pendulum", "--out", str(pendulum_lqr)]) == 0
+    capsys.readouterr()
+    for path, words in ((kernel, "no [state_feedback] table"), (pendulum_lqr, "a state feedback for the pendulum")):
+        status = main(["simulate", "--plant", "seesaw", "--controller", str(path), "--out", str(tmp_path / "out")])
+        err = capsys.readouterr().err
+        assert status == 2 and len(err.strip().splitlines()) == 1 and words in err, err
