@@ -47,12 +47,13 @@ from pendulab.errors import UserError
 #: Files a run folder holds (``simulate``, ``lab``, ``lab --compare``, ``compare``).
 RUN_FILES = frozenset({
     "run.mat", "run.csv", "metrics.json", "rig_log.csv", "timing.json", "comparison.txt", "comparison.png",
-    "rig.gif", "loop.ssp",
+    "rig.gif", "loop.ssp", "results.parquet", "journal.jsonl", "sweep.toml",
 })
-#: Plots and animations of a run (any name: the plot set grows).
-RUN_SUFFIXES = (".png", ".gif")
-#: Sub-folders that are part of a run (``lab --compare`` simulates into ``simulation/``).
-RUN_SUBFOLDERS = ("simulation",)
+#: Plots, animations and tables of a run (any name: the plot set grows; a sweep's parts).
+RUN_SUFFIXES = (".png", ".gif", ".parquet")
+#: Sub-folders that are part of a run (``lab --compare`` simulates into ``simulation/``; a sweep writes
+#: ``parts/`` and ``plots/``; ``simulate --robust`` its rigs' sweep into ``robust/`` and the worst rig's run into ``worst/``).
+RUN_SUBFOLDERS = ("simulation", "parts", "plots", "robust", "worst")
 
 
 # ------------------------------------------------------------------------------------------ checks

@@ -15,6 +15,8 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +65,7 @@ def simulate(
     record: Sequence[str] = (),
     meta: Mapping[str, Any] | None = None,
     fmu_dir: str | os.PathLike[str] | None = None,
+    simulator: "Simulator | None" = None,
 ) -> SimulationResult:
     """Simulate the lab's loop (plant, controller, supervisor FMUs) as ``spec`` describes, and measure the poke.
 
@@ -80,6 +83,9 @@ def simulate(
         Entries added to the result's ``meta`` (e.g. a calibration's label).
     fmu_dir : path, optional
         Folder of the Plant, Controller and Supervisor FMUs (default: the package's, built if missing).
+    simulator : Simulator, optional
+        FMU instances kept from an earlier run, reset for this one instead of loading the FMUs again
+        (a sweep's worker runs thousands of runs this way); default: load them for this run alone.
 
     Returns
     -------
@@ -108,8 +114,12 @@ def simulate(
     params = spec.parameters()
     timing = spec.timing
     block = spec.controller.fmu
-    system = build_system(spec, params, fmu_dir=Path(fmu_dir) if fmu_dir is not None else None)
-    with Master(system) as master:
+    fmu_path = Path(fmu_dir) if fmu_dir is not None else None
+    if simulator is None:
+        context: Any = Master(build_system(spec, params, fmu_dir=fmu_path))
+    else:
+        context = contextlib.nullcontext(simulator.master(build_system(spec, params, fmu_dir=fmu_path, cache=simulator.cache)))
+    with context as master:
         try:
             log = master.run(timing.stop_time, [*RECORDED, *mode_recorded, *record], events=tuple(events), progress=progress)
         except SimulationError as exc:
@@ -153,10 +163,56 @@ def simulate(
     return SimulationResult(columns, metrics, info, spec)
 
 
-def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None) -> Any:
+class Simulator:
+    """FMU instances that :func:`simulate` resets and reuses from one run to the next.
+
+    The first run loads and instantiates the FMUs; each later run resets them (``fmi2Reset``) and sets
+    its own start values, which gives the same result, bit for bit, as loading them afresh. Runs must
+    use the same FMUs (the same kind of controller). Use as a context manager.
+
+    Examples
+    --------
+    >>> import pendulab
+    >>> from pendulab.control import Controller
+    >>> with Simulator() as sim:                                        # doctest: +SKIP
+    ...     results = [pendulab.simulate(pendulab.RunSpec(Controller.pid(kp, 20, 10)), simulator=sim)
+    ...                for kp in (600, 750, 1200)]
+    """
+
+    def __init__(self) -> None:
+        self._master: Any = None
+        #: What :func:`build_system` looks up once: the FMUs' paths, each controller's realization.
+        self.cache: dict[Any, Any] = {}
+
+    def master(self, system: Any) -> Any:
+        """The :class:`~pendulab.cosim.master.Master` for ``system``: loaded on first use, else reset to it."""
+        from pendulab.cosim.master import Master
+
+        if self._master is None:
+            self._master = Master(system)
+        else:
+            self._master.reset(system)
+        return self._master
+
+    def close(self) -> None:
+        """Free the instances (the next run loads the FMUs again)."""
+        if self._master is not None:
+            self._master.close()
+            self._master = None
+
+    def __enter__(self) -> "Simulator":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None, cache: dict[Any, Any] | None = None) -> Any:
     """The co-simulation system (:class:`pendulab.cosim.system.System`) of a run.
 
     One branch per ``spec.plant.kind`` and controller kind; a new plant adds its branch here.
+    ``cache`` (kept by a :class:`Simulator`) remembers the FMUs' paths and each controller's discrete
+    realization across runs.
     """
     from pendulab.cosim.pendulum import pendulum_system
 
@@ -174,9 +230,24 @@ def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None) -> 
                                        delay=timing.delay)
     from pendulab.control.realization import discretize
 
-    lti = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method)
-    return pendulum_system(params, lti.to_parameters(), step=timing.step, supervisor=supervisor, fmu_dir=fmu_dir,
-                           delay=timing.delay, initial_state=spec.initial_state())
+    fmus = None
+    if cache is None:
+        realized = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method).to_parameters()
+    else:
+        from pendulab.fmu.build import ensure_fmu
+
+        fmus = cache.get("fmus")
+        if fmus is None:
+            fmus = cache["fmus"] = {name: ensure_fmu(name, fmu_dir) for name in ("Plant", "Controller", "Supervisor")}
+        key = ("realized", json.dumps(spec.controller.transfer_function.to_dict()), timing.step, timing.method)
+        realized = cache.get(key)
+        if realized is None:
+            if len(cache) > 64:  # a sweep's points come one after another: the recent ones are enough
+                for old in [k for k in cache if k != "fmus"][:32]:
+                    del cache[old]
+            realized = cache[key] = discretize(spec.controller.transfer_function, h=timing.step, method=timing.method).to_parameters()
+    return pendulum_system(params, realized, step=timing.step, supervisor=supervisor, fmu_dir=fmu_dir,
+                           delay=timing.delay, initial_state=spec.initial_state(), fmus=fmus)
 
 
 #: The supervisor modes' signals (runs with re-centring or swing-up) -> their columns.

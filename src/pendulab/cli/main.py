@@ -18,7 +18,7 @@ from pendulab import __version__
 from pendulab.errors import UserError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-SUBCOMMANDS = ("simulate", "tf", "lqr", "build_fmus", "calibrate", "fit", "lab", "rig_emulator", "compare", "gui")
+SUBCOMMANDS = ("simulate", "tf", "lqr", "build_fmus", "calibrate", "fit", "lab", "rig_emulator", "compare", "gui", "sweep")
 
 
 class _Parser(argparse.ArgumentParser):

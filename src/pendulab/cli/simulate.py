@@ -59,6 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--ssp", nargs="?", const="Plant", choices=("Plant", "Plant3"), metavar="PLANT",
                         help="also write the loop as an SSP file (loop.ssp), with the FMI 2.0 plant (Plant, default) "
                              "or the FMI 3.0 one (--ssp Plant3)")
+    parser.add_argument("--robust", type=int, metavar="N",
+                        help="also run the controller on N plausible rigs (the calibration's spread or the documented defaults) "
+                             "and say on how many it balances, with a 95 %% confidence interval; the worst rig's run is saved "
+                             "in DIR/worst/, the rigs' table in DIR/robust/")
+    parser.add_argument("--robust-seed", type=int, default=1, metavar="S", help="seed of the --robust rigs (default 1)")
     parser.set_defaults(func=run)
 
 
@@ -145,6 +150,8 @@ def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: tuple[float, float
 
 def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    if args.robust is not None and args.robust < 1:
+        raise UserError(f"--robust {args.robust}: give the number of plausible rigs, at least 1 (e.g. --robust 200)")
     spec = spec_from_args(args)
     params = spec.parameters()
     seesaw = spec.plant.kind == "seesaw"
@@ -191,7 +198,29 @@ def run(args: argparse.Namespace) -> int:
                                  step=timing.step, delay=timing.delay, plant=args.ssp)
         written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=timing.stop_time))
     _print_summary(result, out_dir, written, time.perf_counter() - started)
+    if args.robust:
+        _robust(args, spec, out_dir)
     return 0
+
+
+def _robust(args: argparse.Namespace, spec: Any, out_dir: Path) -> None:
+    """``--robust N``: the controller on N plausible rigs, one line, the worst rig's run saved in DIR/worst/."""
+    from pendulab.cli.sweep import ProgressBar
+    from pendulab.simulation import simulate
+    from pendulab.sweep.robust import robustness
+
+    bar = ProgressBar()
+    answer = robustness(spec, args.robust, out_dir / "robust", seed=args.robust_seed, progress=bar)
+    bar.end()
+    print(answer.line())
+    worst = answer.worst
+    if worst is None:
+        return
+    inputs = {name: worst[name] for name in answer.sweep_spec.input_names}
+    result = simulate(answer.sweep_spec.run_spec(inputs), meta={"robust_rig": {"sample": worst["sample"], **inputs}})
+    result.write(out_dir / "worst")
+    drawn = ", ".join(f"{k}={v:.4g}" for k, v in inputs.items())
+    print(f"worst rig ({worst['status']}): rig {worst['sample']} ({drawn}); its run is in {out_dir / 'worst'}/")
 
 
 def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:

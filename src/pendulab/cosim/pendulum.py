@@ -69,6 +69,7 @@ def pendulum_system(
     controller_fmu: Path | None = None,
     delay: int = 0,
     plant: str = "Plant",
+    fmus: Mapping[str, Path] | None = None,
 ) -> System:
     """The standard three-FMU system.
 
@@ -88,21 +89,28 @@ def pendulum_system(
     plant : {"Plant", "Plant3"}
         The plant FMU: ``Plant`` (FMI 2.0, default) or ``Plant3`` (the same model as FMI 3.0, for export
         to other tools with :func:`pendulab.cosim.ssp.export_ssp`; pendulab's master runs FMI 2.0 FMUs).
+    fmus : mapping, optional
+        The FMUs' paths by name (``Plant``, ``Controller``, ``Supervisor``), already checked with
+        :func:`~pendulab.fmu.build.ensure_fmu`: a sweep's worker checks them once, not for every run.
     """
     if plant not in PLANT_FMUS:
         raise UserError(f"plant FMU {plant!r}: choose {' or '.join(PLANT_FMUS)}")
     system = System(step=step)
+
+    def fmu(name: str) -> Path:
+        return fmus[name] if fmus and name in fmus else ensure_fmu(name, fmu_dir)
+
     plant_start = {**params.as_dict(), **(initial_state or {})}
-    system.add("plant", ensure_fmu(plant, fmu_dir), plant_start)
+    system.add("plant", fmu(plant), plant_start)
     supervisor = dict(supervisor or {})
     swing_up = bool(supervisor.get("swing_up", False))
     controller_start = {"Lp": params.Lp, "h": step, **controller_parameters}
     if swing_up and controller_fmu is None:
         controller_start["wrap_angle"] = True  # the pendulum may turn over while it swings up
-    controller = system.add("controller", controller_fmu or ensure_fmu("Controller", fmu_dir), controller_start)
+    controller = system.add("controller", controller_fmu or fmu("Controller"), controller_start)
     if swing_up:
         supervisor.setdefault("pendulum_frequency", hanging_frequency(params))
-    system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), supervisor)
+    system.add("supervisor", fmu("Supervisor"), supervisor)
     has = _inputs_of(controller.fmu) if controller_fmu is not None else None
     for source, target in CONNECTIONS:
         if has is not None and target in MODE_INPUTS and target.partition(".")[2] not in has:
