@@ -108,3 +108,26 @@ def test_a_pendulum_controller_file_given_to_the_seesaw_is_refused(capsys, tmp_p
         status = main(["simulate", "--plant", "seesaw", "--controller", str(path), "--out", str(tmp_path / "out")])
         err = capsys.readouterr().err
         assert status == 2 and len(err.strip().splitlines()) == 1 and words in err, err
+
+
+def test_animate_and_ssp_for_the_seesaw(tmp_path: Path, capsys) -> None:
+    from PIL import Image
+    from test_ssp import ecos_run  # the pendulum's SSP tests' Ecos driver
+
+    out = tmp_path / "run"
+    status = main(["simulate", "--plant", "seesaw", "--demo", "--stop-time", "2", "--out", str(out), "--animate", "--ssp"])
+    assert status == 0, capsys.readouterr().err
+    gif = Image.open(out / "rig.gif")
+    assert gif.n_frames == 51  # 2 s at 25 frames per second
+    gif.seek(0)
+    level = np.asarray(gif.convert("RGB")).copy()
+    gif.seek(33)  # t = 1.32 s, the tap's largest tilt
+    tilted = np.asarray(gif.convert("RGB"))
+    assert np.mean(np.any(level != tilted, axis=2)) > 0.01  # the seesaw is drawn tilted
+    # The loop as SSP, run by Ecos: the same tap response as pendulab's master, but for Ecos' two-step
+    # Jacobi delay of the voltage (documented in test_ssp.py), within a few per cent of the tilt.
+    theta = ecos_run(out / "loop.ssp", ["seesaw.theta"], 2000)["seesaw.theta"]
+    ours = scipy.io.loadmat(out / "run.mat")["theta"].ravel()
+    peak = np.max(np.abs(ours))
+    assert np.max(np.abs(theta)) == pytest.approx(peak, rel=0.05)
+    assert np.max(np.abs(theta - ours)) < 0.1 * peak

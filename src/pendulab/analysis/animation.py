@@ -79,15 +79,7 @@ def animate_run(
     if not 1 <= fps <= 60:
         raise ValueError(f"fps={fps} must be between 1 and 60")
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".gif":
-        writer: animation.AbstractMovieWriter = _PaletteGifWriter(fps=fps)
-    elif suffix == ".mp4":
-        if shutil.which("ffmpeg") is None:
-            raise UserError(f"writing {path.name} needs ffmpeg, which is not installed; ask for a .gif instead")
-        writer = animation.FFMpegWriter(fps=fps)
-    else:
-        raise UserError(f"animation file {path} must end in .gif or .mp4")
+    writer = _writer(path, fps)
 
     frames = np.arange(t[0], t[-1] + 1e-9, 1.0 / fps)
     xf = np.interp(frames, t, x)
@@ -142,10 +134,28 @@ def animate_run(
             poke_arrow.set_positions(start, tip)
             poke_text.set_position((0.5 * (start[0] + tip[0]), tip[1] + 0.02))
 
+    return _save(fig, writer, path, draw, frames, poke_start, dpi)
+
+
+def _writer(path: Path, fps: int) -> animation.AbstractMovieWriter:
+    """A GIF writer with one palette, or ffmpeg's for ``.mp4``."""
+    suffix = path.suffix.lower()
+    if suffix == ".gif":
+        return _PaletteGifWriter(fps=fps)
+    if suffix == ".mp4":
+        if shutil.which("ffmpeg") is None:
+            raise UserError(f"writing {path.name} needs ffmpeg, which is not installed; ask for a .gif instead")
+        return animation.FFMpegWriter(fps=fps)
+    raise UserError(f"animation file {path} must end in .gif or .mp4")
+
+
+def _save(fig: Figure, writer: animation.AbstractMovieWriter, path: Path, draw: Any, frames: np.ndarray,
+          marked: float | None, dpi: int) -> Path:
+    """Draw every frame into ``path`` (atomically: a temporary file beside it, then renamed)."""
     if isinstance(writer, _PaletteGifWriter):
         # One palette for every frame, taken from a frame that shows everything (the poke too).
-        poke_frames = np.flatnonzero(frames >= poke_start) if poke_start is not None else np.array([], int)
-        draw(int(poke_frames[0]) if poke_frames.size else 0)
+        marked_frames = np.flatnonzero(frames >= marked) if marked is not None else np.array([], int)
+        draw(int(marked_frames[0]) if marked_frames.size else 0)
         writer.palette = _palette(fig)
     try:
         tmp = _temporary_beside(path)
@@ -162,6 +172,94 @@ def animate_run(
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+#: The seesaw as drawn (m): Quanser's track height above the pivot and the track's half length.
+SEESAW_TRACK_HEIGHT = 0.125
+SEESAW_HALF_LENGTH = 0.45
+
+
+def animate_seesaw(
+    columns: Mapping[str, Any],
+    path: str | os.PathLike[str],
+    *,
+    tap_start: float | None = None,
+    fps: int = 25,
+    dpi: int = 80,
+) -> Path:
+    """Write an animation of a seesaw run: the track tilting about its pivot, the cart on it, the tap.
+
+    Parameters
+    ----------
+    columns : mapping of name -> 1-D array
+        ``t``, ``x`` and ``theta`` (the tilt, positive counter-clockwise: the +x end up).
+    path : path
+        Output file (``.gif``, or ``.mp4`` with ffmpeg); written atomically.
+    tap_start : float, optional
+        Time of the tap: an arrow on the +x end and "tap" for 0.2 s from then.
+
+    Returns
+    -------
+    Path
+
+    Examples
+    --------
+    >>> import tempfile, os, numpy as np
+    >>> t = np.linspace(0.0, 0.4, 41)
+    >>> cols = {"t": t, "x": 0.05 * t, "theta": 0.05 * np.sin(8 * t)}
+    >>> animate_seesaw(cols, os.path.join(tempfile.mkdtemp(), "seesaw.gif"), tap_start=0.1, fps=10).name
+    'seesaw.gif'
+    """
+    t, x, theta = _signals(columns, angle="theta")
+    if not 1 <= fps <= 60:
+        raise ValueError(f"fps={fps} must be between 1 and 60")
+    path = Path(path)
+    writer = _writer(path, fps)
+    frames = np.arange(t[0], t[-1] + 1e-9, 1.0 / fps)
+    xf, thf = np.interp(frames, t, x), np.interp(frames, t, theta)
+
+    fig = Figure(figsize=(6.4, 3.2), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.02, 0.04, 0.96, 0.92))
+    L, H = SEESAW_HALF_LENGTH, SEESAW_TRACK_HEIGHT
+    ax.set_xlim(-0.55, 0.55)
+    ax.set_ylim(-0.16, 0.30)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_axis_off()
+    # Static scene: the floor and the pivot's stand.
+    ax.plot([-0.55, 0.55], [-0.15, -0.15], color="0.5", lw=2)
+    ax.fill([-0.05, 0.05, 0.0], [-0.15, -0.15, 0.0], color="0.6")
+    (track,) = ax.plot([], [], color="0.35", lw=5, solid_capstyle="butt")
+    (post,) = ax.plot([], [], color="0.35", lw=2)
+    cart = ax.fill([], [], facecolor="C0", edgecolor="k", lw=1)[0]
+    ax.plot([0], [0], "o", color="k", ms=5)
+    clock = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", family="monospace", fontsize=9)
+    tap_arrow = FancyArrowPatch((0, 0), (0, 0), arrowstyle="-|>", mutation_scale=18, color="red", lw=2.5)
+    ax.add_patch(tap_arrow)
+    tap_text = ax.text(0, 0, "tap", color="red", fontsize=11, fontweight="bold", ha="center", va="bottom")
+
+    def along(s: float, h: float, angle: float) -> tuple[float, float]:
+        # A point s along the track and h above it, the seesaw tilted by angle about the pivot.
+        return (s * math.cos(angle) - h * math.sin(angle), s * math.sin(angle) + h * math.cos(angle))
+
+    def draw(i: int) -> None:
+        xc, a = xf[i], thf[i]
+        ends = [along(-L, H, a), along(L, H, a)]
+        track.set_data([p[0] for p in ends], [p[1] for p in ends])
+        top = along(0.0, H, a)
+        post.set_data([0.0, top[0]], [0.0, top[1]])
+        corners = [along(xc + dx, H + dy, a) for dx, dy in ((-CART_WIDTH / 2, 0), (CART_WIDTH / 2, 0), (CART_WIDTH / 2, CART_HEIGHT), (-CART_WIDTH / 2, CART_HEIGHT))]
+        cart.set_xy(corners)
+        clock.set_text(f"t = {frames[i]:6.3f} s   x = {100 * xc:+6.1f} cm   θ = {math.degrees(a):+6.2f}°")
+        tapping = tap_start is not None and tap_start <= frames[i] < tap_start + POKE_SHOWN
+        tap_arrow.set_visible(tapping)
+        tap_text.set_visible(tapping)
+        if tapping:
+            end = along(L, H, a)
+            tap_arrow.set_positions((end[0], end[1] - 0.12), end)  # a tap from below lifts the +x end
+            tap_text.set_position((end[0], end[1] - 0.16))
+
+    return _save(fig, writer, path, draw, frames, tap_start, dpi)
 
 
 class _PaletteGifWriter(animation.PillowWriter):
@@ -204,18 +302,19 @@ def _palette(fig: Figure) -> Image.Image:
     return rgb.quantize(colors=64)
 
 
-def _signals(columns: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    angle = "alpha" if "alpha" in columns else "alpha_measured"
+def _signals(columns: Mapping[str, Any], angle: str = "alpha") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if angle not in columns and f"{angle}_measured" in columns:
+        angle = f"{angle}_measured"
     missing = [name for name in ("t", "x", angle) if name not in columns]
     if missing:
-        raise ValueError(f"animate_run needs columns t, x and alpha; missing {', '.join(missing)}")
+        raise ValueError(f"the animation needs columns t, x and {angle}; missing {', '.join(missing)}")
     t, x, alpha = (np.asarray(columns[name], dtype=float).reshape(-1) for name in ("t", "x", angle))
     if not t.size == x.size == alpha.size or t.size < 2:
-        raise ValueError("animate_run needs t, x and alpha of the same length (at least 2 samples)")
+        raise ValueError(f"the animation needs t, x and {angle} of the same length (at least 2 samples)")
     # A fallen or cut-off run may end in non-finite values: animate what is finite.
     ok = np.isfinite(t) & np.isfinite(x) & np.isfinite(alpha)
     if ok.sum() < 2:
-        raise ValueError("animate_run: fewer than 2 finite samples")
+        raise ValueError("the animation: fewer than 2 finite samples")
     return t[ok], x[ok], alpha[ok]
 
 

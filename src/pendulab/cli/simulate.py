@@ -155,8 +155,8 @@ def run(args: argparse.Namespace) -> int:
     spec = spec_from_args(args)
     params = spec.parameters()
     seesaw = spec.plant.kind == "seesaw"
-    if seesaw and (args.animate or args.ssp):
-        raise UserError("--animate and --ssp do not cover the seesaw yet; leave them out (run.mat, run.csv, metrics and --plot do)")
+    if seesaw and args.ssp not in (None, "Plant"):
+        raise UserError(f"--ssp {args.ssp}: the seesaw's loop has one plant FMU, Seesaw.fmu; give --ssp alone")
     folder = run_folder(args.out, "seesaw" if seesaw else spec.plant.pendulum, overwrite=args.overwrite)
     out_dir = folder.path
 
@@ -184,11 +184,24 @@ def run(args: argparse.Namespace) -> int:
             poke_start=None if spec.supervisor.swing_up else spec.poke.start,
             safety_cut_time=result.metrics.get("safety_cut_time_s"), voltage_limit=params.V_max,
         )
-    if args.animate:
+    if args.animate and seesaw:
+        from pendulab.analysis.animation import animate_seesaw
+
+        written.append(animate_seesaw(result.columns, out_dir / "rig.gif", tap_start=spec.poke.start))
+    elif args.animate:
         from pendulab.analysis.animation import animate_run
 
         written.append(animate_run(result.columns, out_dir / "rig.gif", Lp=params.Lp, poke_start=params.poke_start) or out_dir / "rig.gif")
-    if args.ssp:
+    if args.ssp and seesaw:
+        from pendulab.control.state_feedback import realize_state_feedback
+        from pendulab.cosim.seesaw import seesaw_system
+        from pendulab.cosim.ssp import export_ssp
+
+        timing = spec.timing
+        block = realize_state_feedback(spec.controller.state_feedback, timing.step, timing.method)
+        system = seesaw_system(params, block.to_parameters(), step=timing.step, supervisor=spec.supervisor_parameters(), delay=timing.delay)
+        written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=timing.stop_time))
+    elif args.ssp:
         from pendulab.control.realization import discretize
         from pendulab.cosim.pendulum import pendulum_system
         from pendulab.cosim.ssp import export_ssp
