@@ -104,3 +104,21 @@ def test_a_start_beyond_the_stops_or_a_bad_parameter_is_refused_with_a_log_line(
             assert any(words in m for m in messages), messages
     finally:
         fmu.freeInstance()
+
+
+def test_the_fmi3_seesaw_equals_the_fmi2_one() -> None:
+    from fmpy import simulate_fmu
+
+    from pendulab.fmu.build import ensure_fmu
+
+    n = 1200
+    V = voltage(n)
+    signal = np.array([(k * 1e-3, v) for k, v in enumerate(V)], dtype=[("time", float), ("V", float)])
+    runs = [
+        simulate_fmu(str(ensure_fmu(name)), fmi_type="CoSimulation", stop_time=n * 1e-3, step_size=1e-3, output_interval=1e-3,
+                     start_values={"theta": 0.01}, input=signal, output=["x", "theta", "theta_measured"])
+        for name in ("Seesaw", "Seesaw3")
+    ]
+    assert np.ptp(runs[0]["theta"]) > 0.05
+    for name in ("x", "theta", "theta_measured"):
+        np.testing.assert_array_equal(runs[1][name], runs[0][name])
