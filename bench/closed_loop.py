@@ -14,7 +14,7 @@ machine's load hits every variant alike; the medians are compared:
   ``EcosSimulation(ssp_path, step_size).init(parameter_set)`` then ``step_until(10)``. Ecos records
   nothing here (no CSV writer, no listener);
 * **plain Python**: the same equations without FMUs: the CasADi plant stepped per 1 ms
-  (:func:`pendulab.model.plant._step_function`, ten RK4 sub-steps) with its output function (encoder
+  (:func:`pendulab.model.plant.step_function`, ten RK4 sub-steps) with its output function (encoder
   quantization, amplifier saturation), the same discrete controller in numpy, and the supervisor's
   angle/track check in Python, recording the same 9 signals.
 
@@ -49,7 +49,7 @@ from pendulab.cosim.pendulum import RECORDED, pendulum_system  # noqa: E402
 from pendulab.cosim.ssp import PARAMETER_SET, export_ssp  # noqa: E402
 from pendulab.fmu.models.supervisor.config import ALPHA_MAX_DEFAULT, RUNNING, TRIPPED, X_MAX_DEFAULT  # noqa: E402
 from pendulab.model.parameters import PlantParameters  # noqa: E402
-from pendulab.model.plant import PlantModel, _step_function, substeps  # noqa: E402
+from pendulab.model.plant import PlantModel, step_function, substeps  # noqa: E402
 
 H = 1e-3
 RTF_BAR = 100.0
@@ -113,7 +113,7 @@ def plain_python_variant(params: PlantParameters, lti, stop_time: float) -> Call
     def once(timing: Timing) -> dict:
         w0, c0 = clocks()
         n_sub = substeps(H)
-        step = _step_function(False, n_sub)  # ten RK4 sub-steps of the ONE CasADi model, as in Plant.fmu
+        step = step_function(False, n_sub)  # ten RK4 sub-steps of the ONE CasADi model, as in Plant.fmu
         outputs = PlantModel().outputs  # encoder quantization, amplifier saturation, friction force
         p = np.asarray(params.as_vector(), dtype=float)
         A, B, C, D = lti.A, lti.B[:, 0], lti.C[0], float(lti.D[0, 0])

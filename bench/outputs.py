@@ -5,7 +5,7 @@ Bar (issue 8): >= 300x real time, end to end.
 
 In one process, repeated (``--repeats``, default 5) in turns, medians compared:
 
-* **run + files**: :func:`pendulab.cosim.pendulum.simulate_poke` of the demo controller for 100 s of
+* **run + files**: :func:`pendulab.simulate` of the demo controller for 100 s of
   simulated time (loading the FMUs, the loop at 1 kHz, the metrics) followed by
   :func:`pendulab.analysis.results.write_results` into a fresh folder; the ratio is simulated time /
   wall time;
@@ -56,10 +56,11 @@ def per_row_csv(names: list[str], data: np.ndarray) -> bytes:
 def baseline_run(controller: object, stop_time: float, out: Path) -> float:
     """Wall time of the run and its files written one after the other, run.csv by :func:`per_row_csv`."""
     from pendulab.analysis.results import _column_table, _json_safe, _matlab_meta
-    from pendulab.cosim.pendulum import simulate_poke
+    from pendulab.simulation import simulate
+    from pendulab.spec import RunSpec, Timing
 
     t0 = time.perf_counter()
-    result = simulate_poke(controller, stop_time=stop_time)
+    result = simulate(RunSpec(controller, timing=Timing(stop_time=stop_time)))
     names, data = _column_table(result.columns)
     out.mkdir()
     variables = {n: data[:, [j]] for j, n in enumerate(names)}
@@ -77,17 +78,18 @@ def main(argv: list[str] | None = None) -> int:
 
     from pendulab.analysis.results import _column_table, _csv_bytes, write_results
     from pendulab.control.controller import demo_controller
-    from pendulab.cosim.pendulum import simulate_poke
+    from pendulab.simulation import simulate
+    from pendulab.spec import RunSpec, Timing
 
     controller = demo_controller("long")
-    simulate_poke(controller, stop_time=2.0)  # build the FMUs if needed and warm up, outside the timing
+    simulate(RunSpec(controller, timing=Timing(stop_time=2.0)))  # build the FMUs if needed and warm up, outside the timing
     keys = ("end to end", "end to end CPU", "baseline", "simulation", "run.mat", "run.csv", "run.csv per row", "write_results")
     times: dict[str, list[float]] = {k: [] for k in keys}
     with tempfile.TemporaryDirectory(prefix="pendulab-bench-") as tmp:
         for i in range(args.repeats):
             c0 = time.process_time()
             t0 = time.perf_counter()
-            result = simulate_poke(controller, stop_time=args.stop_time)
+            result = simulate(RunSpec(controller, timing=Timing(stop_time=args.stop_time)))
             t1 = time.perf_counter()
             write_results(Path(tmp, f"run{i}"), result.columns, result.meta, result.metrics)
             t2 = time.perf_counter()

@@ -87,11 +87,12 @@ def closed_loop_log(params: PlantParameters | None = None, duration: float = 8.0
     the parameters it was made with (the pendulum's, the poke and the friction of :data:`TRUE`).
     """
     from pendulab.control.controller import demo_controller
-    from pendulab.cosim.pendulum import simulate_poke
+    from pendulab.simulation import simulate
+    from pendulab.spec import RunSpec, Timing
 
     friction = {n: getattr(TRUE, n) for n in ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")}
     params = params or PlantParameters.preset("long", poke_magnitude=150.0, poke_duration=0.005, poke_start=1.0, **friction)
-    run = simulate_poke(demo_controller("long"), params, stop_time=duration)
+    run = simulate(RunSpec.for_parameters(demo_controller("long"), params, timing=Timing(stop_time=duration)))
     c = run.columns
     rng = np.random.default_rng(seed)
     x = params.q_x * np.round((c["x"] + rng.normal(0.0, noise, len(c["x"]))) / params.q_x)

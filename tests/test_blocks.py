@@ -13,7 +13,7 @@ from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
 from pendulab.blocks import Block, Var, block_error, build_block, fix_model_description
-from pendulab.blocks.loop import block_controller_system, simulate_block_controller
+from pendulab.blocks.loop import block_controller_system
 from pendulab.blocks.lqr import (
     GAIN_NAMES,
     LQRController,
@@ -25,6 +25,8 @@ from pendulab.cosim.system import System
 from pendulab.errors import UserError
 from pendulab.model.linear import linearize
 from pendulab.model.parameters import PlantParameters
+from pendulab.simulation import simulate
+from pendulab.spec import ControllerSpec, Poke, RunSpec, Timing
 
 GAIN_SOURCE = '''
 from pendulab.blocks import Block, Var
@@ -62,10 +64,8 @@ def lqr_fmu(tmp_path_factory: pytest.TempPathFactory, long_params: PlantParamete
 @pytest.fixture(scope="module")
 def lqr_run(lqr_fmu: Path, long_params: PlantParameters):
     """The default poke (50 rad/s^2 for 5 ms at 1 s), 5 s, long pendulum, Plant + LQR + Supervisor."""
-    return simulate_block_controller(
-        lqr_fmu, long_params, stop_time=5.0,
-        record=["plant.alphadot", "controller.xdot_estimate", "controller.alphadot_estimate"],
-    )
+    spec = RunSpec.for_parameters(ControllerSpec(fmu=str(lqr_fmu)), long_params, timing=Timing(stop_time=5.0))
+    return simulate(spec, record=["plant.alphadot", "controller.xdot_estimate", "controller.alphadot_estimate"])
 
 
 @pytest.fixture(scope="module")
@@ -181,7 +181,7 @@ def test_lqr_velocity_estimates_follow_the_plant(lqr_run) -> None:
 def test_lqr_without_gains_fails_initialization_with_its_reason(tmp_path: Path) -> None:
     fmu = build_block(LQRController, tmp_path)  # class defaults: all gains zero
     with pytest.raises(SimulationError, match="no gains"):
-        simulate_block_controller(fmu, PlantParameters.preset(poke_start=0.05), stop_time=0.1)
+        simulate(RunSpec(ControllerSpec(fmu=str(fmu)), poke=Poke(start=0.05), timing=Timing(stop_time=0.1)))
 
 
 # ---------------------------------------------------------------------------------------- a user's block
@@ -274,7 +274,7 @@ def test_block_raising_in_the_master_ends_the_run_with_its_reason(tmp_path: Path
                     raise RuntimeError("boom")
     '''))
     with pytest.raises(SimulationError, match=r"Boom \(step at t = 0\.2 s\): RuntimeError: boom"):
-        simulate_block_controller(build_block(source, tmp_path), PlantParameters.preset(poke_start=0.1), stop_time=0.5)
+        simulate(RunSpec(ControllerSpec(fmu=str(build_block(source, tmp_path))), poke=Poke(start=0.1), timing=Timing(stop_time=0.5)))
 
 
 # ---------------------------------------------------------------------------------------- bad input

@@ -19,7 +19,8 @@ import scipy.io
 
 from pendulab.analysis.results import COLUMNS, read_run
 from pendulab.control.controller import demo_controller, unstable_example
-from pendulab.cosim.pendulum import simulate_poke
+from pendulab.simulation import simulate
+from pendulab.spec import Plant, RunSpec, Timing
 from pendulab.fmu.models.supervisor.config import ALPHA_MAX_DEFAULT, RUNNING, TRIP_ANGLE, TRIPPED, X_MAX_DEFAULT
 from pendulab.model.parameters import PlantParameters
 
@@ -40,7 +41,7 @@ METRIC_KEYS = {
 @pytest.fixture(scope="module", params=["long", "short"])
 def demo_run(request, loop_fmus):
     params = PlantParameters.preset(request.param)  # the default poke: 50 rad/s^2, 5 ms, at 1 s
-    return params, simulate_poke(demo_controller(request.param), params, stop_time=5.0)
+    return params, simulate(RunSpec(demo_controller(request.param), plant=Plant(pendulum=request.param)))
 
 
 def test_demo_keeps_the_pendulum_up_through_the_default_poke(demo_run):
@@ -75,7 +76,7 @@ def test_the_loop_is_wired_as_the_spec_says(demo_run):
 
 @pytest.fixture(scope="module")
 def unstable_run(loop_fmus):
-    return PlantParameters.preset(), simulate_poke(unstable_example(), stop_time=3.0)
+    return PlantParameters.preset(), simulate(RunSpec(unstable_example(), timing=Timing(stop_time=3.0)))
 
 
 def test_unstable_controller_ends_at_a_recorded_safety_cut(unstable_run):

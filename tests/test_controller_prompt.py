@@ -8,7 +8,8 @@ import pytest
 
 import pendulab.control.prompt as prompt_module
 from pendulab.control.controller import Controller, Factor, demo_controller
-from pendulab.control.prompt import DEFAULT_POKE, PromptAnswers, prompt_simulation
+from pendulab.control.prompt import DEFAULT_POKE, prompt_simulation
+from pendulab.spec import Poke, RunSpec
 from pendulab.errors import UserError
 
 
@@ -29,7 +30,7 @@ class Script:
     def say(self, text: str) -> None:
         self.said.append(text)
 
-    def run(self) -> PromptAnswers:
+    def run(self) -> RunSpec:
         result = prompt_simulation(ask=self.ask, say=self.say)
         assert not self.answers, f"answers left over: {self.answers}"
         return result
@@ -51,7 +52,7 @@ def test_docstring_example():
 def test_demo_controller_with_defaults():
     script = Script(DEMO + DEFAULTS)
     result = script.run()
-    assert result == PromptAnswers(demo_controller(), "long", None, DEFAULT_POKE)
+    assert result == RunSpec(demo_controller(), poke=Poke(*DEFAULT_POKE))
     assert script.errors == []
     assert any("G(s) = G1(s)·G2(s)·G3(s)" in line for line in script.said)
 
@@ -61,8 +62,8 @@ def test_all_settings(tmp_path):
     calibration.write_text("{}")
     script = Script(["-1+2j, -1-2j", "-10, -20, 3", "-2.5", "F", "s", str(calibration), "220", "0.01", "0.5"])
     result = script.run()
-    assert result.controller == Controller([Factor([complex(-1, 2), complex(-1, -2)], [-10, -20, 3], -2.5)])
-    assert (result.pendulum, result.calibration, result.poke) == ("short", str(calibration), (220.0, 0.01, 0.5))
+    assert result.controller.transfer_function == Controller([Factor([complex(-1, 2), complex(-1, -2)], [-10, -20, 3], -2.5)])
+    assert (result.plant.pendulum, result.plant.calibration, result.poke) == ("short", str(calibration), Poke(220.0, 0.01, 0.5))
 
 
 def test_bad_answers_are_asked_again_with_the_error():
@@ -94,8 +95,8 @@ def test_bad_answers_are_asked_again_with_the_error():
         ]
     )
     result = script.run()
-    assert result.controller == Controller.from_zpk([-1], [-2], 12)
-    assert result.pendulum == "long" and result.calibration is None and result.poke == (-50.0, 0.002, 2.0)
+    assert result.controller.transfer_function == Controller.from_zpk([-1], [-2], 12)
+    assert result.plant.pendulum == "long" and result.plant.calibration is None and result.poke == Poke(-50.0, 0.002, 2.0)
     errors = script.errors
     assert len(errors) == 14
     for fragment in ("'-3+-4j' is not a number", "exactly at s = 0", "no conjugate", "separate numbers with commas", "needs a gain",
@@ -109,21 +110,21 @@ def test_improper_controller_is_refused_at_finish_then_fixed():
     script = Script(["-1, -2", "-3", "5", "f", "a", "none", "-50", "2", "f"] + DEFAULTS)
     result = script.run()
     assert any("improper" in e for e in script.errors)
-    assert result.controller == Controller([Factor([-1, -2], [-3], 5), Factor([], [-50], 2)])
+    assert result.controller.transfer_function == Controller([Factor([-1, -2], [-3], 5), Factor([], [-50], 2)])
 
 
 def test_start_over_discards_the_factors():
     script = Script(["-1", "-2", "3", "a", "-5", "-6", "", "s", "", "-9", "4", "finish"] + DEFAULTS)
     result = script.run()
     assert any("Starting over" in line for line in script.said)
-    assert result.controller == Controller.from_zpk([], [-9], 4)
+    assert result.controller.transfer_function == Controller.from_zpk([], [-9], 4)
 
 
 def test_at_most_five_compensators():
     answers = ["", "-1", "1"] + ["a", "", "-2", ""] * 5 + ["a", "f"] + DEFAULTS
     script = Script(answers)
     result = script.run()
-    assert len(result.controller.factors) == 6
+    assert len(result.controller.transfer_function.factors) == 6
     assert any("already 6 factors" in e for e in script.errors)
 
 

@@ -150,7 +150,7 @@ def test_prompt_never_crashes(answers):
     except UserError as exc:
         assert str(exc).startswith("input ended before the")
     else:
-        assert result.pendulum in ("long", "short")
+        assert result.plant.pendulum in ("long", "short")
 
 
 @SETTINGS

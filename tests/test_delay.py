@@ -3,6 +3,8 @@ voltage computed N control periods earlier, identically in the native runner and
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -10,7 +12,9 @@ from pendulab.cli.main import main
 from pendulab.control.controller import demo_controller
 from pendulab.control.realization import discretize
 from pendulab.cosim.master import Master
-from pendulab.cosim.pendulum import RECORDED, pendulum_system, simulate_poke
+from pendulab.cosim.pendulum import RECORDED, pendulum_system
+from pendulab.simulation import simulate
+from pendulab.spec import Poke, Quantization, RunSpec, Timing
 from pendulab.errors import UserError
 from pendulab.model.parameters import PlantParameters
 
@@ -42,10 +46,12 @@ def test_native_runner_and_python_loop_agree_with_a_delay(delay):
 
 def test_delay_changes_the_response_the_way_a_delay_does():
     """More delay: less phase margin, so a larger overshoot after the same poke (a student sees it)."""
-    p = PlantParameters.preset().with_values(poke_magnitude=220.0, q_alpha=0.0, q_x=0.0, F1=0.0, F2=0.0)
+    base = RunSpec(demo_controller(), poke=Poke(magnitude=220.0), quantization=Quantization(enabled=False))
+    base = base.replace(plant=dataclasses.replace(base.plant, overrides={"F1": 0.0, "F2": 0.0}))
+    p = base.parameters()
     peaks = []
     for delay in (0, 3, 6):
-        result = simulate_poke(demo_controller(), p, stop_time=2.0, delay=delay)
+        result = simulate(base.replace(timing=Timing(stop_time=2.0, delay=delay)))
         a = result.columns["alpha"][result.columns["t"] >= p.poke_start]
         peaks.append(np.max(np.abs(a)))
         assert result.meta["delay"] == delay

@@ -127,22 +127,34 @@ def test_rig_emulator_firmware_with_a_missing_hex_is_one_clear_line(tmp_path):
     assert len(lines) == 1 and "nope.hex" in lines[0] and "not found" in lines[0]
 
 
-def test_twin_command_carries_the_plant_options_as_the_parameter_vector(tmp_path):
+def test_twin_command_carries_the_plant_options_as_the_parameter_vector(tmp_path, capsys):
     from pathlib import Path
 
-    from pendulab.errors import UserError
+    from pendulab.cli.main import main
     from pendulab.hil.firmware import twin_command
     from pendulab.model.parameters import PlantParameters
 
     hex_path = Path("fw.hex")
-    command = twin_command(hex_path, ["--pendulum", "short", "--friction", "2,0.004,3.5,0.04,25", "--raise-after", "2",
-                                      "--poke", "220,0.005,1", str(hex_path)])
+    captured = []
+
+    def twin(path, options):
+        captured.append(twin_command(path, options))
+        return 0
+
+    # The command line's options reach the twin as EmulatorOptions (a spec), not as a re-parsed argv.
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("pendulab.hil.firmware.run_twin", twin)
+        assert main(["rig-emulator", "--firmware", str(hex_path), "--pendulum", "short", "--friction", "2,0.004,3.5,0.04,25",
+                     "--raise-after", "2", "--poke", "220,0.005,1"]) == 0
+    command = captured[0]
     values = [float(v) for v in command[command.index("--params") + 1].split(",")]
     expected = PlantParameters.preset("short").with_values(F1=2, v1=0.004, F2=3.5, v2=0.04, B=25)
     assert values == expected.as_vector()
     assert command[command.index("--raise-after") + 1] == "2.0"
     assert [float(v) for v in command[command.index("--poke") + 1].split(",")] == [220, 0.005, 1]
-    assert command.count(str(hex_path)) == 1  # '--firmware HEX' leaves the path in argv: not an option
-    for bad in (["--friction", "1,2"], ["--pendulum", "huge"], ["--raise-after", "-1"], ["--jitter", "1"], ["--what"]):
-        with pytest.raises(UserError):
-            twin_command(hex_path, bad)
+    assert command.count(str(hex_path)) == 1
+    for bad, word in ((["--friction", "1,2"], "--friction"), (["--pendulum", "huge"], "huge"), (["--raise-after", "-1"], "--raise-after"),
+                      (["--jitter", "1"], "--jitter"), (["--tcp", "0"], "--tcp"), (["--what"], "--what")):
+        assert main(["rig-emulator", "--firmware", str(tmp_path / "missing.hex"), *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and word in err[0], err

@@ -13,7 +13,7 @@ import threading
 import pytest
 
 from pendulab.cli.main import main
-from pendulab.gui.app import check_controller, run_settings
+from pendulab.gui.app import check_controller, run_spec
 from pendulab.gui.server import GuiServer
 from pendulab.errors import UserError
 
@@ -102,11 +102,11 @@ def test_settings_messages_are_the_command_lines(capsys, tmp_path):
     form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "2", "delay": "9",
             "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}}
     with pytest.raises(UserError) as exc:
-        run_settings(form, None, "default")
+        run_spec(form, None)
     assert main(["simulate", "--demo", "--stop-time", "2", "--delay", "9", "--out", str(tmp_path / "x")]) == 2
     assert capsys.readouterr().err.strip() == f"pendulab: error: {exc.value}"
     with pytest.raises(UserError, match="poke starts at t=3"):
-        run_settings({**form, "delay": "0", "poke": {"magnitude": "50", "duration": "0.005", "start": "3"}}, None, "default")
+        run_spec({**form, "delay": "0", "poke": {"magnitude": "50", "duration": "0.005", "start": "3"}}, None)
 
 
 def test_pages_and_refusals(server):
@@ -234,26 +234,26 @@ def test_upload_of_the_old_labs_mat_calibration(server, tmp_path):
 def test_a_failed_simulation_reaches_the_page_as_one_message(tmp_path, monkeypatch):
     import queue
 
-    import pendulab.cosim.pendulum as pendulum
+    import pendulab.simulation as simulation
     from pendulab.cosim.master import SimulationError
     from pendulab.gui.worker import run_simulation
 
     form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "2",
             "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}}
-    settings = run_settings(form, None, "default")
+    spec = run_spec(form, None)
 
     def fail(*args, **kwargs):
         raise SimulationError("plant.fmu: fmi2DoStep returned fmi2Error at t=1.2")
 
-    monkeypatch.setattr(pendulum, "simulate_poke", fail)
+    monkeypatch.setattr(simulation, "simulate", fail)
     q = queue.Queue()
-    run_simulation(settings, str(tmp_path / "run"), q)
+    run_simulation(spec, {}, str(tmp_path / "run"), q)
     kind, message = q.get_nowait()
     assert kind == "error" and message.startswith("the simulation failed: plant.fmu: fmi2DoStep returned fmi2Error at t=1.2")
     assert not (tmp_path / "run").exists()  # nothing half-written
 
-    monkeypatch.setattr(pendulum, "simulate_poke", lambda *a, **k: 1 / 0)
-    run_simulation(settings, str(tmp_path / "run"), q)
+    monkeypatch.setattr(simulation, "simulate", lambda *a, **k: 1 / 0)
+    run_simulation(spec, {}, str(tmp_path / "run"), q)
     kind, message = q.get_nowait()
     assert kind == "error" and "internal error (ZeroDivisionError" in message
 
@@ -289,11 +289,11 @@ def test_the_supervisor_mode_switches_reach_the_run(tmp_path):
 
     form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "8",
             "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}, "recentre": True, "swing_up": True}
-    settings = run_settings(form, None, "default")
-    assert settings.supervisor == {"recentre": True, "swing_up": True} and settings.start == "hanging"
-    assert run_settings({**form, "recentre": False, "swing_up": False}, None, "default").supervisor == {}
+    spec = run_spec(form, None)
+    assert spec.supervisor_parameters() == {"recentre": True, "swing_up": True} and spec.plant.start == "hanging"
+    assert run_spec({**form, "recentre": False, "swing_up": False}, None).supervisor_parameters() == {}
     q = queue.Queue()
-    run_simulation(settings, str(tmp_path / "run"), q)
+    run_simulation(spec, {}, str(tmp_path / "run"), q)
     messages = [q.get_nowait() for _ in range(q.qsize())]
     assert messages[-1] == ("done", None), messages
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())

@@ -261,7 +261,7 @@ def test_bad_start_values_fail_initialization_naming_the_component(loop_fmus):
 
 def test_master_frees_its_instances_and_folders(plant_fmu):
     master = Master(plant_system(plant_fmu))
-    folders = list(master._tmp_dirs)
+    folders = [c.folder for c in master.instances.values()]
     assert folders and all(Path(d).is_dir() for d in folders)
     # Only what a run needs is unpacked: no sources, no other platform's binary.
     unpacked = {p.relative_to(folders[0]).parts[0] for p in Path(folders[0]).rglob("*")}

@@ -115,14 +115,13 @@ def test_validate_holds_the_command_lines_rules(case):
 
 def test_simulate_runs_the_spec_and_its_files_carry_it(tmp_path, loop_fmus):
     import pendulab
-    from pendulab.cosim.pendulum import simulate_poke
 
     spec = RunSpec(demo_controller("short"), plant=Plant(pendulum="short"), poke=Poke(220.0, 0.005, 0.2),
                    timing=Timing(stop_time=0.6, delay=1))
     result = pendulab.simulate(spec)
     assert result.spec is spec and len(result.columns["t"]) == 601
-    # The same run described by parameters (the older API) gives the same samples.
-    old = simulate_poke(demo_controller("short"), spec.parameters(), stop_time=0.6, delay=1)
+    # The same run described by its resolved parameters gives the same samples.
+    old = pendulab.simulate(RunSpec.for_parameters(demo_controller("short"), spec.parameters(), timing=spec.timing))
     for name, column in old.columns.items():
         np.testing.assert_array_equal(result.columns[name], column, err_msg=name)
     assert old.metrics == result.metrics
@@ -146,3 +145,18 @@ def test_the_command_line_builds_the_spec_a_script_would(monkeypatch, tmp_path, 
     assert main(argv) == 0
     assert seen == [RunSpec(Controller.pid(600, 200, 5), plant=Plant(pendulum="short"), poke=Poke(220.0, 0.005, 0.2),
                             timing=Timing(stop_time=0.4, method="zoh", delay=2), quantization=Quantization(enabled=False))]
+
+
+def test_lab_compare_simulates_the_spec_at_the_rigs_delay(tmp_path, loop_fmus, capsys):
+    """``pendulab lab --compare``: the session's spec (the rig's delay) simulated beside the rig's run."""
+    from pendulab.analysis.results import read_run
+    from pendulab.hil.compare import compare_with_simulation
+    from pendulab.simulation import simulate
+
+    spec = RunSpec(demo_controller(), poke=Poke(220.0, 0.005, 0.5), timing=Timing(stop_time=2.0, delay=2))
+    rig = tmp_path / "rig"
+    simulate(spec.replace(timing=Timing(stop_time=2.0, delay=3))).write(rig)  # stands in for the rig's run
+    text = compare_with_simulation(rig, spec, metrics={})
+    _, meta = read_run(rig / "simulation")
+    assert RunSpec.from_json(meta["run"]) == spec and int(meta["delay"]) == 2
+    assert "natural frequency" in text and text in capsys.readouterr().out

@@ -33,7 +33,6 @@ import json
 import math
 import os
 import sys
-import types
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
@@ -52,12 +51,28 @@ MAX_STEPS = 2_000_000
 MAX_STEP = 0.1
 
 
+class FrozenDict(dict):
+    """A read-only dict (picklable, unlike a mappingproxy: a spec goes to worker processes)."""
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError("a RunSpec is immutable: build a new one (dataclasses.replace) instead")
+
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = _refuse  # type: ignore[assignment]
+    __ior__ = _refuse  # type: ignore[assignment]
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (FrozenDict, (dict(self),))
+
+    def __hash__(self) -> int:  # type: ignore[override]
+        return hash(tuple(sorted(self.items())))
+
+
 def _frozen_mapping(value: Any, where: str) -> Mapping[str, Any]:
     if value is None:
         value = {}
     if not isinstance(value, Mapping):
         raise UserError(f"{where} must be a table of names and values, got {type(value).__name__}")
-    return types.MappingProxyType(dict(value))
+    return FrozenDict(value)
 
 
 def _choice(*choices: str, default: str) -> Any:
@@ -66,7 +81,7 @@ def _choice(*choices: str, default: str) -> Any:
 
 def _mapping_field() -> Any:
     # Mappings are held read-only and left out of the hash (a spec stays hashable).
-    return field(default_factory=lambda: types.MappingProxyType({}), hash=False, metadata={"mapping": True})
+    return field(default_factory=FrozenDict, hash=False, metadata={"mapping": True})
 
 
 # ------------------------------------------------------------------------------------------ sections
@@ -99,7 +114,35 @@ class Plant:
     start: str = _choice("upright", "hanging", default="upright")
 
     def validate(self) -> None:
-        """Nothing to check alone: :meth:`RunSpec.validate` checks the preset, calibration and controller."""
+        """Check the preset's names, the calibration file and the overrides (UserError)."""
+        self.parameters()
+
+    def parameters(self) -> Any:
+        """The plant's :class:`~pendulab.model.parameters.PlantParameters` (the seesaw's
+        :class:`~pendulab.model.seesaw.SeesawParameters`): the preset, then the calibration file, then
+        the overrides (the poke and the quantization are the run's)."""
+        from pendulab.model.parameters import PlantParameters
+
+        if self.kind == "seesaw":
+            from pendulab.model.seesaw import SeesawParameters
+
+            if self.cart != "ip02":
+                raise UserError(f"the seesaw carries the IP02 cart without its weight; --cart {self.cart} is not a seesaw configuration")
+            seesaw = SeesawParameters()
+            if self.calibration:
+                from pendulab.calibration.files import load_calibration
+
+                seesaw = seesaw.with_values(**load_calibration(self.calibration).values)
+            return seesaw.with_values(**self.overrides) if self.overrides else seesaw
+
+        params = PlantParameters.preset(pendulum=self.pendulum, cart=self.cart)
+        if self.calibration:
+            from pendulab.calibration.files import load_calibration
+
+            params = load_calibration(self.calibration).apply(params)
+        if self.overrides:
+            params = params.with_values(**self.overrides)
+        return params
 
 
 @dataclass(frozen=True)
@@ -139,6 +182,25 @@ class Poke:
     magnitude: float = POKE_DEFAULT[0]
     duration: float = POKE_DEFAULT[1]
     start: float = POKE_DEFAULT[2]
+
+    @classmethod
+    def parse(cls, text: str) -> "Poke":
+        """From the command line's ``MAG,DUR,START`` (e.g. ``"220,0.005,1"``), checked.
+
+        Examples
+        --------
+        >>> Poke.parse("220, 0.005, 1")
+        Poke(magnitude=220.0, duration=0.005, start=1.0)
+        """
+        try:
+            values = tuple(float(p.strip()) for p in text.split(","))
+        except ValueError:
+            raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1") from None
+        if len(values) != 3:
+            raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1")
+        poke = cls(*values)
+        poke.validate()
+        return poke
 
     def validate(self) -> None:
         """Check this section's own rules (UserError with the command line's message)."""
@@ -207,12 +269,18 @@ class Supervisor:
     swing_up : bool
         Swing the pendulum up from hanging (energy law) and hand it to the controller inside the catch
         window (default off).
+    rig_mode : bool, optional
+        The angle input is the rig's encoder (0 hanging down); engage inside the capture window.
+    auto_start : bool, optional
+        Start at initialization (simulation, default) or wait for the start command (lab).
     """
 
     alpha_max: float | None = None
     x_max: float | None = None
     recentre: bool = False
     swing_up: bool = False
+    rig_mode: bool | None = None
+    auto_start: bool | None = None
 
     def validate(self) -> None:
         """Check this section's own rules (UserError with the command line's message)."""
@@ -271,7 +339,9 @@ class RunSpec:
 
     def __post_init__(self) -> None:
         controller = self.controller
-        if not isinstance(controller, ControllerSpec):
+        if controller is None:
+            controller = ControllerSpec()
+        elif not isinstance(controller, ControllerSpec):
             controller = ControllerSpec(transfer_function=_as_controller(controller))
         elif controller.transfer_function is not None:
             controller = dataclasses.replace(controller, transfer_function=_as_controller(controller.transfer_function))
@@ -294,7 +364,7 @@ class RunSpec:
 
         The messages are the command line's (they name its options). Returns the spec itself.
         """
-        for name in SECTIONS:
+        for name in ("timing", "poke", "quantization", "supervisor", "controller", "plant"):  # files last
             section = getattr(self, name)
             _check_choices(section, name)
             section.validate()
@@ -318,27 +388,17 @@ class RunSpec:
             raise UserError(f"controller FMU {c.fmu} does not exist; build it with pendulab.blocks.build_block")
         if self.plant.start == "hanging" and not self.supervisor.swing_up:
             raise UserError("the pendulum starts hanging but nothing swings it up: add --swing-up (or start it upright)")
-        self.parameters()  # the preset, the calibration file and the overrides
         return self
 
     # ------------------------------------------------------------------ derived values
     def parameters(self) -> Any:
-        """The plant's :class:`~pendulab.model.parameters.PlantParameters`.
+        """The plant's :class:`~pendulab.model.parameters.PlantParameters` for this run.
 
-        The preset, then the calibration file, the overrides, the poke and the quantization.
+        :meth:`Plant.parameters` (preset, calibration file, overrides), then the poke and the quantization.
         """
-        from pendulab.model.parameters import PlantParameters
-
-        plant = self.plant
-        if plant.kind == "seesaw":
-            return self._seesaw_parameters()
-        params = PlantParameters.preset(pendulum=plant.pendulum, cart=plant.cart)
-        if plant.calibration:
-            from pendulab.calibration.files import load_calibration
-
-            params = load_calibration(plant.calibration).apply(params)
-        if plant.overrides:
-            params = params.with_values(**plant.overrides)
+        params = self.plant.parameters()
+        if self.plant.kind == "seesaw":
+            return self._seesaw_run_parameters(params)
         params = params.with_values(poke_magnitude=self.poke.magnitude, poke_duration=self.poke.duration, poke_start=self.poke.start)
         q = self.quantization
         if not q.enabled:
@@ -349,22 +409,9 @@ class RunSpec:
                 params = params.with_values(**steps)
         return params
 
-    def _seesaw_parameters(self) -> Any:
-        """The seesaw's :class:`~pendulab.model.seesaw.SeesawParameters`: its defaults (the IP02 cart without
-        its weight), the calibration, the overrides, the poke as the tap, the quantization (``q_alpha`` is
-        the tilt encoder's step)."""
-        from pendulab.model.seesaw import SeesawParameters
-
-        plant = self.plant
-        if plant.cart != "ip02":
-            raise UserError(f"the seesaw carries the IP02 cart without its weight; --cart {plant.cart} is not a seesaw configuration")
-        params = SeesawParameters()
-        if plant.calibration:
-            from pendulab.calibration.files import load_calibration
-
-            params = params.with_values(**load_calibration(plant.calibration).values)
-        if plant.overrides:
-            params = params.with_values(**plant.overrides)
+    def _seesaw_run_parameters(self, params: Any) -> Any:
+        """The seesaw's parameters for this run: the poke as the tap, the quantization (``q_alpha`` is the
+        tilt encoder's step)."""
         params = params.with_values(tap_magnitude=self.poke.magnitude, tap_duration=self.poke.duration, tap_start=self.poke.start)
         q = self.quantization
         if not q.enabled:
@@ -373,15 +420,15 @@ class RunSpec:
         return params.with_values(**steps) if steps else params
 
     def supervisor_parameters(self) -> dict[str, Any]:
-        """Start values for the Supervisor FMU: the settings given (not ``None``; a mode only when it is on),
-        by their FMU names.
+        """Start values for the Supervisor FMU: the settings that differ from their field's default (``None``:
+        the FMU's own default; a mode only when it is on), by their FMU names.
 
         A field is the Supervisor FMU's parameter of the same name, unless its metadata says
         ``{"fmu": False}`` (a setting the master acts on instead).
         """
         s = self.supervisor
         return {f.name: getattr(s, f.name) for f in fields(s)
-                if getattr(s, f.name) is not None and getattr(s, f.name) is not False and f.metadata.get("fmu", True)}
+                if getattr(s, f.name) is not None and getattr(s, f.name) != f.default and f.metadata.get("fmu", True)}
 
     def initial_state(self) -> dict[str, float]:
         """The plant's start values for the pendulum's pose at t = 0 (``plant.start``)."""

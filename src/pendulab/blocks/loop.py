@@ -1,22 +1,24 @@
 """Run a controller block (a Python block FMU) in the lab's loop, in place of the generic Controller.
 
-The block takes the place of ``controller`` in :func:`pendulab.cosim.pendulum.pendulum_system`:
+The block takes the place of ``controller`` in :func:`pendulab.cosim.pendulum.pendulum_system`
+(:func:`pendulab.simulate` of a spec whose ``controller.fmu`` is the block):
 it gets ``alpha_measured`` and must output ``V_command`` and have the parameters ``Lp`` and ``h``
 (the system sets them). Every other input named like a plant output (``x_measured``, ``x``,
 ``xdot``, ``alpha``, ``alphadot``, ...) is connected from the plant as well.
 
 Examples
 --------
+>>> import pendulab, tempfile
 >>> from pendulab.blocks.lqr import build_lqr_controller
->>> from pendulab.blocks.loop import simulate_block_controller
->>> result = simulate_block_controller(build_lqr_controller("fmus/"))     # doctest: +SKIP
->>> result.metrics["stable"]                                              # doctest: +SKIP
+>>> fmu = build_lqr_controller(tempfile.mkdtemp())
+>>> result = pendulab.simulate(pendulab.RunSpec(pendulab.ControllerSpec(fmu=str(fmu)), timing=pendulab.Timing(stop_time=2.0)))
+>>> result.metrics["safety_cut_time_s"] is None
 True
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -62,40 +64,3 @@ def block_controller_system(
         if causality.get(name) == "input" and f"controller.{name}" not in wired:
             system.connect(f"plant.{name}", f"controller.{name}")
     return system
-
-
-def simulate_block_controller(
-    fmu: str | Path,
-    params: Any = None,
-    *,
-    stop_time: float = 5.0,
-    step: float = 1e-3,
-    supervisor: Mapping[str, Any] | None = None,
-    controller_parameters: Mapping[str, Any] | None = None,
-    record: Sequence[str] = (),
-    fmu_dir: Path | None = None,
-):
-    """Simulate the poke run with a block controller: :func:`pendulab.simulate` of a spec with ``controller.fmu``.
-
-    Parameters
-    ----------
-    record : sequence of str
-        Extra signals (``"controller.xdot_estimate"``) to return in ``result.columns`` under their
-        full names.
-
-    Returns
-    -------
-    pendulab.simulation.SimulationResult
-    """
-    from pendulab.model.parameters import PlantParameters
-    from pendulab.simulation import simulate
-    from pendulab.spec import ControllerSpec, RunSpec, Supervisor, Timing
-
-    params = params or PlantParameters.preset()
-    controller = ControllerSpec(fmu=str(fmu), parameters=dict(controller_parameters or {}))
-    spec = RunSpec.for_parameters(controller, params, timing=Timing(stop_time=stop_time, step=step),
-                                  supervisor=Supervisor(**dict(supervisor or {})))
-    result = simulate(spec, record=record, fmu_dir=fmu_dir)
-    for key in ("pendulum", "cart", "calibration"):  # not known from the parameters alone
-        result.meta.pop(key)
-    return result

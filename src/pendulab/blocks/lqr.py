@@ -20,8 +20,9 @@ Examples
 >>> design = design_lqr()                        # long pendulum, default weights
 >>> bool(all(design.closed_loop_poles.real < 0))
 True
->>> fmu = build_lqr_controller("fmus/")                                   # doctest: +SKIP
->>> result = simulate_block_controller(fmu, stop_time=5.0)                 # doctest: +SKIP
+
+Build it with :func:`build_lqr_controller` and run it with :func:`pendulab.simulate` (example in
+:mod:`pendulab.blocks.loop`).
 """
 
 from __future__ import annotations

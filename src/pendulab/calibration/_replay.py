@@ -31,7 +31,7 @@ import numpy as np
 
 from pendulab.calibration._shooting import _compile
 from pendulab.model.parameters import PlantParameters
-from pendulab.model.plant import MAX_SUBSTEP, _step_function, substeps
+from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
 
 #: Reassociation and reciprocals (not ``-ffast-math``: NaN and infinity keep their meaning, a replay
 #: that diverges still says so). A third faster; the replay still equals the reference simulation to 1e-9.
@@ -49,7 +49,7 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
     Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are inputs; the others are
     compiled in as the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
     """
-    step = _step_function(False, n_sub).expand()
+    step = step_function(False, n_sub).expand()
     s, V, t, r, sr = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("r"), ca.SX.sym("sr", 4)
     theta, h = ca.SX.sym("theta", len(free)), ca.SX.sym("h")
     entries = [ca.SX(v) for v in fixed]

@@ -13,12 +13,12 @@ import casadi as ca
 import numpy as np
 
 from pendulab.model.parameters import PlantParameters
-from pendulab.model.plant import MAX_SUBSTEP, _step_function, substeps
+from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
 
 
 @lru_cache(maxsize=64)
 def _trajectory(n_steps: int, n_sub: int, smooth: bool, n_parallel: int) -> ca.Function:
-    accum = _step_function(smooth, n_sub).expand().mapaccum("plant_steps", n_steps)
+    accum = step_function(smooth, n_sub).expand().mapaccum("plant_steps", n_steps)
     # Wrap it so that p and h are one column each: map() then splits them per trajectory correctly.
     x0, V, t = ca.MX.sym("x0", 4), ca.MX.sym("V", 1, n_steps), ca.MX.sym("t", 1, n_steps)
     p, h = ca.MX.sym("p", len(PlantParameters.names())), ca.MX.sym("h")

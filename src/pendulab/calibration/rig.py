@@ -19,7 +19,6 @@ Examples
 from __future__ import annotations
 
 import abc
-import shutil
 import warnings
 from typing import Callable, Sequence
 
@@ -159,59 +158,40 @@ class _FmuStepper:
     name = "fmu"
 
     def __init__(self, params: PlantParameters, period: float, progress: Callable[[str], None] | None = None) -> None:
-        from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave
-
+        from pendulab.cosim.component import Component
         from pendulab.fmu.build import ensure_fmu
 
-        path = ensure_fmu("Plant", progress=progress)
-        description = read_model_description(str(path))
-        self._vr = {v.name: v.valueReference for v in description.modelVariables}
-        self._unzipped = extract(str(path))
-        self._fmu = FMU2Slave(
-            guid=description.guid,
-            unzipDirectory=self._unzipped,
-            modelIdentifier=description.coSimulation.modelIdentifier,
-            instanceName="virtual_rig",
-        )
-        self._fmu.instantiate()
-        self._params = params
+        self._fmu = Component("virtual_rig", ensure_fmu("Plant", progress=progress), params.as_dict())
         self._period = period
-        self._in = [self._vr["V"]]
-        self._out = [self._vr["x_measured"]]
+        self._in = self._fmu.port(["V"])
+        self._out = self._fmu.port(["x_measured"])
+        self._state = self._fmu.port(["x", "xdot"])
         self._live = False
 
     def reset(self, x0: float) -> float:
-        fmu, vr = self._fmu, self._vr
+        start = {"x": x0, "xdot": 0.0, "alpha": 0.0, "alphadot": 0.0, "V": 0.0}
         if self._live:
-            fmu.reset()
-        fmu.setupExperiment(startTime=0.0)
-        names = self._params.names()
-        fmu.setReal([vr[n] for n in names], self._params.as_vector())
-        fmu.setReal([vr["x"], vr["xdot"], vr["alpha"], vr["alphadot"], vr["V"]], [x0, 0.0, 0.0, 0.0, 0.0])
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
+            self._fmu.reset(0.0, start)
+        else:
+            self._fmu.setup(0.0, start)
         self._live = True
-        return fmu.getReal(self._out)[0]
+        self._fmu.read(self._out)
+        return self._out.values["Real"][0]
 
     def step(self, voltage: float, t: float) -> float:
-        self._fmu.setReal(self._in, [voltage])
-        status = self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=self._period)
-        if status not in (0, None):  # pragma: no cover - the FMU checks for non-finite states
-            raise CalibrationError(f"the plant FMU failed at t={t:g} s (status {status})")
-        return self._fmu.getReal(self._out)[0]
+        self._in.values["Real"][0] = voltage
+        self._fmu.write(self._in)
+        self._fmu.step(t, self._period)  # SimulationError if the FMU refuses (it checks for non-finite states)
+        self._fmu.read(self._out)
+        return self._out.values["Real"][0]
 
     def state(self) -> np.ndarray:
-        return np.asarray(self._fmu.getReal([self._vr["x"], self._vr["xdot"]]))
+        self._fmu.read(self._state)
+        return np.asarray(self._state.values["Real"][:2])
 
     def close(self) -> None:
-        try:
-            if self._live:
-                self._fmu.terminate()
-            self._fmu.freeInstance()
-        finally:
-            shutil.rmtree(self._unzipped, ignore_errors=True)
-            self._live = False
+        self._fmu.close()
+        self._live = False
 
 
 class _CasadiStepper:
@@ -222,10 +202,10 @@ class _CasadiStepper:
     def __init__(self, params: PlantParameters, period: float) -> None:
         import casadi as ca
 
-        from pendulab.model.plant import MAX_SUBSTEP, PlantModel, _step_function, substeps
+        from pendulab.model.plant import MAX_SUBSTEP, PlantModel, step_function, substeps
 
         n_sub = substeps(period, MAX_SUBSTEP)
-        step = _step_function(False, n_sub)
+        step = step_function(False, n_sub)
         model = PlantModel()
         state, V, t = ca.MX.sym("state", 4), ca.MX.sym("V"), ca.MX.sym("t")
         p = ca.MX.sym("p", model.n_parameters)

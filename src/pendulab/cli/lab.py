@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 from pathlib import Path
 
-from pendulab.cli.options import (
-    add_controller_options, add_overwrite_option, add_plant_options, controller_from_args, plant_parameters_from_args,
-)
+from pendulab.cli.options import add_controller_options, add_overwrite_option, add_plant_options, controller_from_args, plant_from_args
 from pendulab.errors import UserError
 from pendulab.hil.protocol import DEFAULT_MAX_DELAY
 from pendulab.outputs import run_folder
@@ -54,8 +53,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pendulab.cosim.pendulum import pendulum_system
-
     if args.stop_time is not None and not (math.isfinite(args.stop_time) and args.stop_time > 0):
         raise UserError(f"--stop-time {args.stop_time} must be a positive number of seconds")
     from pendulab.hil.protocol import MAX_DELAY
@@ -71,18 +68,21 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.control.prompt import prompt_controller
 
         controller = prompt_controller()
-    params = plant_parameters_from_args(args)
-    from pendulab.cli.simulate import POKE_DEFAULT, parse_poke
+    from pendulab.spec import Poke, RunSpec, Supervisor, Timing
 
-    poke = parse_poke(args.poke) if args.poke else POKE_DEFAULT
-    params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
+    # The poke is the one --compare simulates (the rig's is detected); the supervisor waits for 's' and
+    # reads the rig's encoder (0 hanging down).
+    spec = RunSpec(controller, plant=plant_from_args(args), poke=Poke.parse(args.poke) if args.poke else Poke(),
+                   timing=Timing(method=args.method),
+                   supervisor=Supervisor(rig_mode=True, auto_start=False, recentre=args.recentre, swing_up=args.swing_up)).validate()
+    params = spec.parameters()
     folder = run_folder(args.out, f"lab-{args.pendulum}", overwrite=args.overwrite)
     out_dir = folder.path
 
-    from pendulab.control.realization import discretize
     from pendulab.hil.keys import KeySource
     from pendulab.hil.link import LinkLost, RigLink
     from pendulab.hil.session import LabSession, choose_delay, write_lab_results
+    from pendulab.simulation import build_system, run_meta
 
     def say(text: str) -> None:
         print(text, flush=True)
@@ -93,13 +93,9 @@ def run(args: argparse.Namespace) -> int:
         say(f"rig at {args.port}: protocol {identity.protocol}, firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, "
             f"boot id {identity.boot_id:#010x}, period {identity.period_us} us")
         # The controller is realized before anything moves: a controller the rules refuse never enables the motor.
-        lti = discretize(controller, h=period, method=args.method)
-        supervisor = {"rig_mode": True, "auto_start": False}
-        if args.recentre:
-            supervisor["recentre"] = True
-        if args.swing_up:
-            supervisor["swing_up"] = True
-        system = pendulum_system(params, lti.to_parameters(), step=period, supervisor=supervisor)
+        # The rig's own transport delay is physical: the system has none (timing.delay = 0 here).
+        spec = spec.replace(timing=Timing(stop_time=spec.poke.start + 4.0, step=period, method=args.method)).validate()
+        system = build_system(spec, params)
         from pendulab.hil.realtime import raise_priority
 
         priority = raise_priority()  # before the delay is measured: the session runs at this priority
@@ -120,19 +116,11 @@ def run(args: argparse.Namespace) -> int:
             session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say,
                                  priority=priority)
             reason, status = session.run()
-    meta = {
-        "recentre": bool(args.recentre),
-        "swing_up": bool(args.swing_up),
-        "controller": getattr(controller, "describe", lambda: str(controller))(),
-        "discretization": args.method,
-        "step": period,
-        "pendulum": args.pendulum,
-        "cart": args.cart,
-        "calibration": args.calibration or "default",
-        "parameters": params.as_dict(),
-        "port": args.port,
-        "rig_boot_id": identity.boot_id,
-    }
+    # As simulated: the rig's delay, the supervisor as in simulation (for --compare and the files' meta).
+    spec = spec.replace(timing=dataclasses.replace(spec.timing, delay=delay),
+                        supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up))
+    meta = {**run_meta(spec, params), "recentre": bool(args.recentre), "swing_up": bool(args.swing_up),
+            "port": args.port, "rig_boot_id": identity.boot_id}
     metrics, timing = write_lab_results(session, Lp=params.Lp, q_alpha=1.0 / identity.pend_counts_per_rad, meta=meta, round_trips=round_trips)
     if args.plot:
         from pendulab.analysis.plots import plot_run
@@ -143,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     if args.compare:
         from pendulab.hil.compare import compare_with_simulation
 
-        compare_with_simulation(out_dir, controller, params, delay=delay, method=args.method, metrics=metrics)
+        compare_with_simulation(out_dir, spec, metrics=metrics)
     lat = timing["answer_latency_ms"]
     say(f"session: {timing['samples']} samples, answer latency p50 {lat['p50'] or 0:.3f} ms, p99 {lat['p99'] or 0:.3f} ms, "
         f"{timing['late_commands']} late, {timing['missed_samples']} missed, {timing['crc_errors']} CRC errors")

@@ -87,7 +87,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         raw = list(sys.argv[1:] if argv is None else argv)
         args = parser.parse_args(_join_signed_values(raw))
-        args.raw_argv = raw  # for subcommands that hand their options on to another program
         _use_fmu_dir(getattr(args, "fmus", None))
         if not getattr(args, "func", None):
             parser.print_help()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from pendulab.errors import UserError
 from pendulab.model.parameters import CARTS, PlantParameters
+from pendulab.spec import Plant
 
 
 def add_plant_options(parser: argparse.ArgumentParser, *, pendulums: tuple[str, ...] = ("long", "short")) -> None:
@@ -16,14 +16,16 @@ def add_plant_options(parser: argparse.ArgumentParser, *, pendulums: tuple[str, 
     parser.add_argument("--calibration", metavar="FILE", help="calibration file (JSON, or the old lab's .mat)")
 
 
+def plant_from_args(args: argparse.Namespace, *, start: str = "upright", **overrides: float) -> Plant:
+    """The plant section of a run: ``--pendulum``, ``--cart``, ``--calibration`` (and parameter overrides)."""
+    calibration = getattr(args, "calibration", None)
+    return Plant(pendulum=args.pendulum, cart=args.cart, calibration=str(calibration) if calibration else None,
+                 overrides=overrides, start=start)
+
+
 def plant_parameters_from_args(args: argparse.Namespace) -> PlantParameters:
     """Parameters of the preset named by the options, with the calibration file applied."""
-    params = PlantParameters.preset(pendulum=args.pendulum, cart=args.cart)
-    if getattr(args, "calibration", None):
-        from pendulab.calibration.files import load_calibration
-
-        params = load_calibration(args.calibration).apply(params)
-    return params
+    return plant_from_args(args).parameters()
 
 
 def add_controller_options(parser: argparse.ArgumentParser) -> None:
@@ -41,47 +43,10 @@ def add_controller_options(parser: argparse.ArgumentParser) -> None:
 
 def controller_from_args(args: argparse.Namespace) -> Any | None:
     """The controller the flags describe, or None when none was given."""
-    from pendulab import control as ctl
+    from pendulab.control.entry import controller_from_options
 
-    sources = [
-        name
-        for name, present in (
-            ("--zeros/--poles/--gain", args.zeros is not None or args.poles is not None or args.gain is not None),
-            ("--pid", args.pid is not None),
-            ("--controller", args.controller is not None),
-            ("--demo", args.demo),
-        )
-        if present
-    ]
-    if len(sources) > 1:
-        raise UserError(f"give one controller, not {' and '.join(sources)}")
-    if args.compensator and not (args.zeros is not None or args.poles is not None or args.gain is not None or args.controller or args.demo):
-        raise UserError("--compensator needs a kernel: give --zeros, --poles and --gain (or --controller FILE)")
-    if args.demo:
-        base = ctl.demo_controller(args.pendulum)
-    elif args.controller:
-        base = ctl.load_controller_file(args.controller)
-    elif args.pid is not None:
-        parts = args.pid.split(",")
-        try:
-            kp, ki, kd = (float(p) for p in parts)
-        except ValueError:
-            raise UserError(f"--pid {args.pid!r} must be three numbers KP,KI,KD, e.g. --pid 40,5,4") from None
-        return ctl.Controller.pid(kp, ki, kd)
-    elif args.zeros is not None or args.poles is not None or args.gain is not None:
-        if args.gain is None:
-            raise UserError("the kernel needs a gain: add --gain K")
-        # Kernel and numbered compensators, so that an error names the factor it is about.
-        return ctl.parse_controller(args.zeros or "", args.poles or "", args.gain, args.compensator)
-    else:
-        return None
-    if args.compensator:
-        first = len(base.factors)
-        extra = [ctl.parse_compensator(c, f"compensator {first + i}") for i, c in enumerate(args.compensator)]
-        base = ctl.Controller([*base.factors, *extra])
-    return base
-
-
+    return controller_from_options(zeros=args.zeros, poles=args.poles, gain=args.gain, compensators=args.compensator,
+                                   pid=args.pid, file=args.controller, demo=args.demo, pendulum=args.pendulum)
 
 
 def add_overwrite_option(parser: argparse.ArgumentParser) -> None:

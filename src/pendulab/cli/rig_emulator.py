@@ -8,7 +8,7 @@ import signal
 import sys
 from pathlib import Path
 
-from pendulab.cli.options import add_plant_options, plant_parameters_from_args
+from pendulab.cli.options import add_plant_options, plant_from_args
 from pendulab.errors import UserError
 
 
@@ -65,17 +65,16 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
         _non_negative(getattr(args, option), "--" + option.replace("_", "-"))
     if not 0 <= args.byte_error_rate < 0.5:
         raise UserError(f"--byte-error-rate {args.byte_error_rate} must be a probability from 0 to below 0.5, e.g. 1e-3")
-    params = plant_parameters_from_args(args)
+    friction = {}
     if args.friction:
         from pendulab.cli.calibrate import _friction
 
         try:
-            values = _friction(args.friction)
+            friction = dict(zip(("F1", "v1", "F2", "v2", "B"), _friction(args.friction)))
         except argparse.ArgumentTypeError as exc:
             raise UserError(f"--friction {exc}") from None
-        params = params.with_values(**dict(zip(("F1", "v1", "F2", "v2", "B"), values)))
     return EmulatorOptions(
-        params=params,
+        params=plant_from_args(args, **friction).parameters(),
         raise_after=args.raise_after,
         poke=parse_poke(args.poke) if args.poke else None,
         latency=args.latency / 1000.0,
@@ -91,15 +90,15 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
 
 
 def run(args: argparse.Namespace) -> int:
+    options = emulator_options(args)
     if args.firmware is not None:
         try:
             from pendulab.hil.firmware import run_twin
         except ImportError:
             raise UserError("--firmware needs the firmware twin (pendulab.hil.firmware), which this installation lacks") from None
-        raw = getattr(args, "raw_argv", sys.argv[1:])
-        passthrough = [a for a in raw[raw.index("rig-emulator") + 1:] if not a.startswith("--firmware")]
-        return run_twin(Path(args.firmware) if args.firmware else None, passthrough)
-    options = emulator_options(args)
+        if args.tcp is not None:
+            raise UserError("--tcp is not available with --firmware (the twin's link is the firmware's own UART); drop it")
+        return run_twin(Path(args.firmware) if args.firmware else None, options)
     if sys.platform == "win32" and args.tcp is None:
         raise UserError("pseudo-terminals do not exist on Windows: use --tcp PORT and 'pendulab lab --port socket://127.0.0.1:PORT'")
     from pendulab.hil.emulator import RigEmulator

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pendulab.cli.options import add_controller_options, add_mode_options, add_overwrite_option, add_plant_options, controller_from_args
+from pendulab.cli.options import (
+    add_controller_options, add_mode_options, add_overwrite_option, add_plant_options, controller_from_args, plant_from_args,
+)
 from pendulab.errors import UserError
 from pendulab.outputs import run_folder
 from pendulab.spec import MAX_STEPS, POKE_DEFAULT  # noqa: F401  (POKE_DEFAULT: used by lab)
@@ -68,60 +71,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def parse_poke(text: str) -> tuple[float, float, float]:
-    """``MAG,DUR,START`` as three numbers, checked by :meth:`pendulab.spec.Poke.validate`."""
+    """``MAG,DUR,START`` as three numbers, checked (:meth:`pendulab.spec.Poke.parse`)."""
     from pendulab.spec import Poke
 
-    parts = [p.strip() for p in text.split(",")]
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1") from None
-    if len(values) != 3:
-        raise UserError(f"--poke {text!r} must be three numbers MAG,DUR,START, e.g. --poke 50,0.005,1")
-    Poke(*values).validate()
-    return values  # type: ignore[return-value]
-
-
-def check_run_settings(stop_time: float, step: float, delay: int) -> None:
-    """Refuse a stop time, control period or transport delay the simulation cannot take (UserError)."""
-    from pendulab.spec import Timing
-
-    Timing(stop_time=stop_time, step=step, delay=delay).validate()
+    return dataclasses.astuple(Poke.parse(text))  # type: ignore[return-value]
 
 
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """The run the options describe (asking on a terminal when no controller is given), validated."""
-    from pendulab.spec import Plant, Poke, Quantization, RunSpec, Supervisor, Timing
+    from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
 
     timing = Timing(stop_time=args.stop_time, step=args.step, method=args.method, delay=args.delay)
     timing.validate()
-    poke = parse_poke(args.poke) if args.poke else None
+    poke = Poke.parse(args.poke) if args.poke else None
     if args.plant == "seesaw":
         return _seesaw_spec(args, timing, poke)
     controller = controller_from_args(args)
-    pendulum, calibration = args.pendulum, args.calibration
+    spec = RunSpec(controller, plant=plant_from_args(args, start=args.start), poke=poke or Poke(), timing=timing,
+                   quantization=Quantization(enabled=not args.no_quantization),
+                   supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up))
     if controller is None:
         if not sys.stdin.isatty():
             raise UserError("no controller given: use --demo, --zeros/--poles/--gain, --pid or --controller FILE (or run on a terminal to be asked)")
         from pendulab.control.prompt import prompt_simulation
 
-        answers = prompt_simulation()
-        controller = answers.controller
-        pendulum = answers.pendulum
-        calibration = answers.calibration or calibration
-        poke = poke or answers.poke
-    spec = RunSpec(
-        controller,
-        plant=Plant(pendulum=pendulum, cart=args.cart, calibration=str(calibration) if calibration else None, start=args.start),
-        poke=Poke(*(poke or POKE_DEFAULT)),
-        timing=timing,
-        quantization=Quantization(enabled=not args.no_quantization),
-        supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up),
-    )
+        asked = prompt_simulation(base=spec)
+        # Flags given on the command line win over the answers' defaults.
+        plant = dataclasses.replace(asked.plant, calibration=asked.plant.calibration or spec.plant.calibration)
+        spec = asked.replace(plant=plant, poke=poke or asked.poke)
     return spec.validate()
 
 
-def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: tuple[float, float, float] | None) -> RunSpec:
+def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: Any) -> RunSpec:
     """The seesaw's run: a state feedback (--demo: Quanser's LQR, or --controller FILE), the tap."""
     from pendulab.control.state_feedback import design_state_feedback, load_state_feedback_file
     from pendulab.cosim.seesaw import TAP_DEFAULT
@@ -140,7 +121,7 @@ def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: tuple[float, float
     spec = RunSpec(
         ControllerSpec(state_feedback=design),
         plant=Plant(kind="seesaw", cart=args.cart, calibration=str(args.calibration) if args.calibration else None),
-        poke=Poke(*(poke or TAP_DEFAULT)),
+        poke=poke or Poke(*TAP_DEFAULT),
         timing=timing,
         quantization=Quantization(enabled=not args.no_quantization),
         supervisor=Supervisor(),

@@ -526,6 +526,52 @@ class Controller:
         return _label_errors("PID", lambda: cls.from_zpk(zeros, poles, num[0]))
 
 
+def zpk(zeros: Any, poles: Any, gain: Any) -> Controller:
+    """A controller from its zeros, poles and gain (one kernel factor), checked against the entry rules.
+
+    Parameters
+    ----------
+    zeros, poles : sequence of number
+        Roots (complex ones in conjugate pairs; none exactly at 0).
+    gain : float
+        Leading-coefficient gain, non-zero.
+
+    Returns
+    -------
+    Controller
+
+    Examples
+    --------
+    >>> print(zpk([-3, -6], [-30, -0.1], 80))
+    80 (s + 3)(s + 6) / ((s + 30)(s + 0.1))
+    """
+    return Controller.from_zpk(zeros, poles, gain)
+
+
+def pid(kp: float, ki: float, kd: float, wf: float = 62.8, Ti: float = 0.628) -> Controller:
+    """The lab's PID ``Kp + Ki/(s + 1/Ti) + Kd·wf·s/(s + wf)`` (see :meth:`Controller.pid`).
+
+    Parameters
+    ----------
+    kp, ki, kd : float
+        Proportional, integral and derivative gains.
+    wf : float
+        Derivative filter frequency in rad/s (default 62.8).
+    Ti : float
+        Integral time constant in s (the integrator's pole is at ``-1/Ti``; default 0.628).
+
+    Returns
+    -------
+    Controller
+
+    Examples
+    --------
+    >>> pid(600, 200, 5).order
+    2
+    """
+    return Controller.pid(kp, ki, kd, wf=wf, Ti=Ti)
+
+
 def _pid_real(value: Any, name: str) -> float:
     number = to_number(value, f"PID {name}")
     if isinstance(number, complex):

@@ -9,26 +9,27 @@ Examples
 --------
 >>> from pendulab.control.prompt import prompt_simulation
 >>> answers = iter(["-5", "7", "40000", "a", "-17", "-80", "", "a", "", "-80", "", "f", "", "", "", "", ""])
->>> result = prompt_simulation(ask=lambda q: next(answers), say=lambda text: None)
->>> print(result.controller)
+>>> spec = prompt_simulation(ask=lambda q: next(answers), say=lambda text: None)
+>>> print(spec.controller.transfer_function)
 40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)
->>> result.pendulum, result.calibration, result.poke
-('long', None, (50.0, 0.005, 1.0))
+>>> spec.plant.pendulum, spec.plant.calibration, spec.poke
+('long', None, Poke(magnitude=50.0, duration=0.005, start=1.0))
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
 from pathlib import Path
 from typing import Callable, TypeVar
 
 from pendulab.control.controller import MAX_FACTORS, Controller, Factor, Number, parse_numbers, to_number
 from pendulab.errors import ControllerError, UserError
+from pendulab.spec import POKE_DEFAULT, Poke, RunSpec
 
 T = TypeVar("T")
 
 #: Poke defaults (SPEC §2): magnitude rad/s², duration s, start s.
-DEFAULT_POKE = (50.0, 0.005, 1.0)
+DEFAULT_POKE = POKE_DEFAULT
 PENDULUMS = ("long", "short")
 
 INTRO = (
@@ -38,26 +39,6 @@ INTRO = (
     "integrator. The controller acts on the tip error e = -Lp*alpha; a positive gain pushes the cart\n"
     "under a falling pendulum."
 )
-
-
-@dataclass(frozen=True)
-class PromptAnswers:
-    """What the prompt collected.
-
-    Attributes
-    ----------
-    controller : Controller
-    pendulum : {"long", "short"}
-    calibration : str or None
-        A calibration file path, or ``None`` for the default calibration.
-    poke : (float, float, float)
-        Magnitude (rad/s²), duration (s), start time (s).
-    """
-
-    controller: Controller
-    pendulum: str
-    calibration: str | None
-    poke: tuple[float, float, float]
 
 
 class _Dialogue:
@@ -177,8 +158,10 @@ def _enter_controller(d: _Dialogue) -> Controller:
 def prompt_simulation(
     ask: Callable[[str], str] = input,
     say: Callable[[str], None] = print,
-) -> PromptAnswers:
-    """Ask for the controller, pendulum, calibration file and poke.
+    *,
+    base: RunSpec | None = None,
+) -> RunSpec:
+    """Ask for the controller, pendulum, calibration file and poke: the run they describe.
 
     Parameters
     ----------
@@ -186,12 +169,20 @@ def prompt_simulation(
         ``ask(prompt) -> answer``; raises ``EOFError`` at the end of the input (as :func:`input`).
     say : callable
         Shows a line of text (explanations, errors, the controller entered).
+    base : RunSpec, optional
+        The run's other settings (timing, cart, ...); the answers replace its controller, pendulum,
+        calibration and poke.
+
+    Returns
+    -------
+    RunSpec
 
     Raises
     ------
     UserError
         The input ended before all answers were given.
     """
+    base = base or RunSpec()
     d = _Dialogue(ask, say)
     say(INTRO)
     controller = _enter_controller(d)
@@ -201,7 +192,8 @@ def prompt_simulation(
     magnitude = d.question(f"Poke magnitude in rad/s^2 [{DEFAULT_POKE[0]:g}]: ", _poke_value("magnitude", DEFAULT_POKE[0], minimum=None))
     duration = d.question(f"Poke duration in s [{DEFAULT_POKE[1]:g}]: ", _poke_value("duration", DEFAULT_POKE[1], minimum=0.0))
     start = d.question(f"Poke start time in s [{DEFAULT_POKE[2]:g}]: ", _poke_value("start time", DEFAULT_POKE[2], minimum=0.0))
-    return PromptAnswers(controller, pendulum, calibration, (magnitude, duration, start))
+    plant = dataclasses.replace(base.plant, pendulum=pendulum, calibration=calibration)
+    return base.replace(controller=controller, plant=plant, poke=Poke(magnitude, duration, start))
 
 
 def prompt_controller(

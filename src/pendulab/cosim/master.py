@@ -14,129 +14,17 @@ Examples
 from __future__ import annotations
 
 import ctypes
-import shutil
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from fmpy import extract, read_model_description
-from fmpy import platform as fmpy_platform
-from fmpy.fmi2 import FMU2Slave
 
+from pendulab.cosim.component import _C_TYPES, _TYPES, Component, SimulationError
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
 
-_TYPES = ("Real", "Integer", "Boolean")
-_C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
-
-
-class SimulationError(RuntimeError):
-    """An FMU reported an error during the run."""
-
-
-@dataclass
-class _Port:
-    """The variables of one component read or written together, one ctypes array per base type."""
-
-    vrs: dict[str, Any]
-    values: dict[str, Any]
-    names: dict[str, list[str]]
-
-    @classmethod
-    def create(cls, variables: Sequence[tuple[str, str, int]]) -> "_Port":
-        names: dict[str, list[str]] = {t: [] for t in _TYPES}
-        refs: dict[str, list[int]] = {t: [] for t in _TYPES}
-        for name, vtype, vr in variables:
-            names[vtype].append(name)
-            refs[vtype].append(vr)
-        return cls(
-            vrs={t: (ctypes.c_uint * len(refs[t]))(*refs[t]) for t in _TYPES},
-            values={t: (_C_TYPES[t] * len(refs[t]))() for t in _TYPES},
-            names=names,
-        )
-
-    def index(self, name: str) -> tuple[str, int]:
-        for t in _TYPES:
-            if name in self.names[t]:
-                return t, self.names[t].index(name)
-        raise KeyError(name)
-
-
-def _needed_at_run_time(name: str) -> bool:
-    return not name.startswith(("sources/", "binaries/", "documentation/")) or name.startswith(f"binaries/{fmpy_platform}/")
-
-
-class _Instance:
-    """One instantiated FMU with its cached C entry points."""
-
-    def __init__(self, name: str, fmu_path: Path, tmp_dirs: list[str]):
-        if not fmu_path.is_file():
-            raise UserError(f"FMU {fmu_path} of component {name!r} does not exist; build it with 'pendulab build-fmus'")
-        self.name = name
-        # Only what a run needs: the description, resources and this platform's binary (not the
-        # sources, documentation or other platforms' binaries; this halves the start-up time).
-        try:
-            unzipdir = extract(str(fmu_path), include=_needed_at_run_time)
-        except zipfile.BadZipFile:
-            raise UserError(f"{fmu_path} of component {name!r} is not an FMU (not a ZIP archive)") from None
-        tmp_dirs.append(unzipdir)
-        try:
-            self.description = read_model_description(unzipdir)
-        except Exception as exc:  # fmpy raises plain exceptions for a missing or invalid modelDescription.xml
-            raise UserError(f"{fmu_path} of component {name!r} is not a valid FMU: {exc}") from None
-        if self.description.coSimulation is None:
-            raise UserError(f"{fmu_path} has no Co-Simulation interface; the master runs Co-Simulation FMUs")
-        if self.description.fmiVersion != "2.0":
-            raise UserError(f"{fmu_path} is an FMI {self.description.fmiVersion} FMU; the master runs FMI 2.0 FMUs "
-                            "(the FMI 3.0 plant is for other tools: pendulab simulate --ssp Plant3)")
-        self.variables = {v.name: v for v in self.description.modelVariables}
-        self.fmu = FMU2Slave(
-            guid=self.description.guid,
-            unzipDirectory=unzipdir,
-            modelIdentifier=self.description.coSimulation.modelIdentifier,
-            instanceName=name,
-        )
-        self.fmu.instantiate()
-        self.handle = self.fmu.component
-        dll = self.fmu.dll
-        self.do_step = dll.fmi2DoStep
-        self.get = {"Real": dll.fmi2GetReal, "Integer": dll.fmi2GetInteger, "Boolean": dll.fmi2GetBoolean}
-        self.set = {"Real": dll.fmi2SetReal, "Integer": dll.fmi2SetInteger, "Boolean": dll.fmi2SetBoolean}
-
-    def variable(self, name: str) -> Any:
-        try:
-            return self.variables[name]
-        except KeyError:
-            raise UserError(f"component {self.name!r} has no variable {name!r}") from None
-
-    def port(self, names: Iterable[str]) -> _Port:
-        return _Port.create([(n, self.variable(n).type, self.variable(n).valueReference) for n in names])
-
-    def set_value(self, name: str, value: Any) -> None:
-        v = self.variable(name)
-        if v.type == "Real":
-            self.fmu.setReal([v.valueReference], [float(value)])
-        elif v.type in ("Integer", "Enumeration"):
-            self.fmu.setInteger([v.valueReference], [int(value)])
-        elif v.type == "Boolean":
-            self.fmu.setBoolean([v.valueReference], [bool(value)])
-        else:
-            raise UserError(f"variable {self.name}.{name} of type {v.type} cannot be set by the master")
-
-    def read(self, port: _Port) -> None:
-        for t in _TYPES:
-            n = len(port.names[t])
-            if n and self.get[t](self.handle, port.vrs[t], n, port.values[t]) > 1:
-                raise SimulationError(f"{self.name}: fmi2Get{t} failed")
-
-    def write(self, port: _Port) -> None:
-        for t in _TYPES:
-            n = len(port.names[t])
-            if n and self.set[t](self.handle, port.vrs[t], n, port.values[t]) > 1:
-                raise SimulationError(f"{self.name}: fmi2Set{t} failed")
-
+__all__ = ["Event", "Master", "SimulationError"]
 
 @dataclass
 class Event:
@@ -158,11 +46,10 @@ class Master:
         if not system.components:
             raise UserError("the system has no components")
         self.system = system
-        self._tmp_dirs: list[str] = []
-        self.instances: dict[str, _Instance] = {}
+        self.instances: dict[str, Component] = {}
         try:
             for name, component in system.components.items():
-                self.instances[name] = _Instance(name, component.fmu, self._tmp_dirs)
+                self.instances[name] = Component(name, component.fmu, component.start_values)
         except BaseException:
             self.close()
             raise
@@ -176,14 +63,8 @@ class Master:
 
     def close(self) -> None:
         for instance in self.instances.values():
-            try:
-                instance.fmu.freeInstance()
-            except Exception:  # noqa: BLE001 - freeing must go on for the others
-                pass
+            instance.close()
         self.instances.clear()
-        for d in self._tmp_dirs:
-            shutil.rmtree(d, ignore_errors=True)
-        self._tmp_dirs.clear()
 
     def reset(self, system: System | None = None) -> None:
         """Reset every FMU (``fmi2Reset``) for another :meth:`run`, optionally of another ``system``.
@@ -203,8 +84,8 @@ class Master:
 
     def initialize(self, start_time: float, stop_time: float | None = None) -> None:
         """Set every component's start values and initialize it (``run`` does this itself)."""
-        for name in self.instances:
-            self._initialize_component(name, start_time, stop_time)
+        for instance in self.instances.values():
+            instance.setup(start_time, stop_time=stop_time)
 
     def reinitialize(self, name: str, start_time: float, values: Mapping[str, Any] | None = None) -> None:
         """Reset one component (``fmi2Reset``) and initialize it again at ``start_time``.
@@ -213,20 +94,7 @@ class Master:
         outside :meth:`run` restarts a component: the lab's controller each time it engages, the rig
         emulator's plant when a hand moves the pendulum.
         """
-        self.instances[name].fmu.reset()
-        self._initialize_component(name, start_time, None, values)
-
-    def _initialize_component(self, name: str, start_time: float, stop_time: float | None,
-                              values: Mapping[str, Any] | None = None) -> None:
-        instance = self.instances[name]
-        instance.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
-        for variable, value in {**self.system.components[name].start_values, **(values or {})}.items():
-            instance.set_value(variable, value)
-        try:
-            instance.fmu.enterInitializationMode()
-            instance.fmu.exitInitializationMode()
-        except Exception as exc:  # fmpy raises FMICallException with the status only
-            raise SimulationError(f"{name}: initialization failed ({exc}); check its start values") from exc
+        self.instances[name].reset(start_time, values)
 
     def _check_wiring(self, record: Sequence[str]) -> None:
         """Every connection joins an output to an input of the same type; recorded names exist."""
@@ -335,7 +203,7 @@ class Master:
         self.initialize(start_time, stop_time)
         plan = _Plan(self, n_steps, record)
         time = start_time + h * np.arange(n_steps + 1)
-        reset_after_step: list[tuple[_Instance, str, Any]] = []
+        reset_after_step: list[tuple[Component, str, Any]] = []
         phase_a, late, recorders, steps = plan.phase_a, plan.late, plan.recorders, plan.steps
 
         runner = _native_runner() if self.native else None

@@ -1,27 +1,27 @@
 """The lab's loop as a co-simulation: plant -> controller -> supervisor -> plant, and a poke run.
 
+A run is simulated with :func:`pendulab.simulate`, which builds this system.
+
 Examples
 --------
->>> from pendulab.control.controller import demo_controller
->>> from pendulab.cosim.pendulum import simulate_poke
->>> result = simulate_poke(demo_controller("long"), stop_time=3.0)    # doctest: +SKIP
->>> result.metrics["stable"]                                          # doctest: +SKIP
-True
+>>> from pendulab.control import demo_controller, discretize
+>>> from pendulab.cosim.pendulum import pendulum_system
+>>> system = pendulum_system(PlantParameters.preset(), discretize(demo_controller(), h=1e-3).to_parameters())
+>>> sorted(system.components)
+['controller', 'plant', 'supervisor']
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
-from pendulab.cosim.master import Event
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
 from pendulab.fmu.build import ensure_fmu
 from pendulab.model.parameters import PlantParameters
-from pendulab.simulation import SimulationResult
 
 #: The loop's wiring, by variable name (SPEC §7): the measured angle feeds controller and supervisor,
 #: the supervisor owns the motor voltage, the controller's reference (re-centring) and its engagement
@@ -137,51 +137,6 @@ def _inputs_of(fmu: Path) -> set[str]:
     from fmpy import read_model_description
 
     return {v.name for v in read_model_description(str(fmu)).modelVariables if v.causality == "input"}
-
-
-def simulate_poke(
-    controller: Any,
-    params: PlantParameters | None = None,
-    *,
-    stop_time: float = 5.0,
-    step: float = 1e-3,
-    method: str = "tustin",
-    supervisor: Mapping[str, Any] | None = None,
-    events: tuple[Event, ...] = (),
-    meta: Mapping[str, Any] | None = None,
-    fmu_dir: Path | None = None,
-    progress: Callable[[float], None] | None = None,
-    delay: int = 0,
-    start: str = "upright",
-) -> SimulationResult:
-    """Simulate the loop with a poke: :func:`pendulab.simulate` of the spec these arguments describe.
-
-    Parameters
-    ----------
-    controller : Controller or control.TransferFunction
-        The student's G(s); discretized at ``step`` with ``method`` (``"tustin"`` or ``"zoh"``).
-    params : PlantParameters, optional
-        Default: long pendulum, IP02 cart, the lab's friction; the poke is part of the parameters.
-    delay : int, optional
-        Transport delay of N control periods before the plant's voltage input, as on the rig.
-    start : {"upright", "hanging"}
-        The pendulum at t = 0 (hanging: with ``supervisor={"swing_up": True}``).
-    """
-    from pendulab.simulation import simulate
-    from pendulab.spec import RunSpec, Supervisor, Timing
-
-    spec = RunSpec.for_parameters(controller, params or PlantParameters.preset(),
-                                  timing=Timing(stop_time=stop_time, step=step, method=method, delay=delay),
-                                  supervisor=Supervisor(**dict(supervisor or {})))
-    if start != "upright":
-        from dataclasses import replace
-
-        spec = spec.replace(plant=replace(spec.plant, start=start))
-    result = simulate(spec, progress=progress, events=events, fmu_dir=fmu_dir)
-    for key in ("pendulum", "cart", "calibration"):  # not known from the parameters alone
-        result.meta.pop(key)
-    result.meta.update(meta or {})
-    return result
 
 
 def collect_columns(log: Mapping[str, np.ndarray], params: PlantParameters) -> dict[str, np.ndarray]:

@@ -2,9 +2,8 @@
 
 Every function takes the page's form as plain JSON data and returns plain JSON data; a mistake in
 the form raises :class:`~pendulab.errors.UserError` with the same message as the command line gives,
-because the form is turned into the command line's options and read by the same functions
-(:func:`pendulab.cli.options.controller_from_args`, :func:`~pendulab.cli.simulate.parse_poke`,
-:func:`~pendulab.cli.simulate.check_run_settings`, :func:`~pendulab.cli.options.plant_parameters_from_args`).
+because the form is read by the same functions: :func:`pendulab.control.entry.controller_from_options`
+for the controller, and a :class:`pendulab.spec.RunSpec` (its ``validate``) for the run.
 
 Heavy imports (numpy, python-control, CasADi) happen inside the functions: the server starts and draws
 the first page before any of them is needed.
@@ -12,9 +11,8 @@ the first page before any of them is needed.
 
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -24,22 +22,6 @@ from pendulab.errors import UserError
 MAX_COMPENSATORS = 5
 #: Most samples of one signal sent to the page (a long run is thinned for drawing; files keep all).
 MAX_POINTS = 20_000
-
-
-@dataclass(frozen=True)
-class RunSettings:
-    """Everything a simulation needs, checked: what :func:`pendulab.cosim.pendulum.simulate_poke` takes."""
-
-    controller: Any
-    params: Any
-    stop_time: float
-    step: float
-    method: str
-    delay: int
-    meta: dict[str, Any]
-    #: The supervisor's modes (issue 21): ``recentre``, ``swing_up``; a swing-up starts hanging.
-    supervisor: dict[str, Any] = field(default_factory=dict)
-    start: str = "upright"
 
 
 def _text(form: Mapping[str, Any], key: str) -> str:
@@ -57,26 +39,20 @@ def _number(value: Any, what: str) -> float:
     return number
 
 
-def _controller_args(form: Mapping[str, Any]) -> argparse.Namespace:
-    """The command line's controller options that the form describes."""
-    args = argparse.Namespace(zeros=None, poles=None, gain=None, compensator=[], pid=None, controller=None, demo=False)
-    if form.get("mode") == "pid":
-        pid = form.get("pid") or {}
-        args.pid = ",".join(_text(pid, k).strip() for k in ("kp", "ki", "kd"))
-        return args
-    args.zeros, args.poles = _text(form, "zeros"), _text(form, "poles")
-    args.gain = _text(form, "gain").strip() or None
-    rows = [row for row in (form.get("compensators") or []) if any(_text(row, k).strip() for k in ("zeros", "poles", "gain"))]
-    # As typed on the command line: --compensator "ZEROS;POLES;GAIN", read by the same parser.
-    args.compensator = [f"{_text(row, 'zeros')};{_text(row, 'poles')};{_text(row, 'gain')}" for row in rows]
-    return args
-
-
 def parse_controller_form(form: Mapping[str, Any]) -> Any:
     """The controller of the form: kernel plus compensators, or PID; the command line's rules and messages."""
-    from pendulab.cli.options import controller_from_args
+    from pendulab.control.entry import controller_from_options
 
-    controller = controller_from_args(_controller_args(form))
+    if form.get("mode") == "pid":
+        pid = form.get("pid") or {}
+        controller = controller_from_options(pid=",".join(_text(pid, k).strip() for k in ("kp", "ki", "kd")))
+    else:
+        rows = [row for row in (form.get("compensators") or []) if any(_text(row, k).strip() for k in ("zeros", "poles", "gain"))]
+        # As typed on the command line: --compensator "ZEROS;POLES;GAIN", read by the same parser.
+        controller = controller_from_options(
+            zeros=_text(form, "zeros"), poles=_text(form, "poles"), gain=_text(form, "gain").strip() or None,
+            compensators=[f"{_text(row, 'zeros')};{_text(row, 'poles')};{_text(row, 'gain')}" for row in rows],
+        )
     if controller is None:
         raise UserError("no controller given: type the kernel's zeros, poles and gain, or choose PID")
     return controller
@@ -93,17 +69,22 @@ def check_controller(form: Mapping[str, Any]) -> dict[str, Any]:
     return {"ok": True, "describe": str(controller), "factors": factors, "order": controller.order}
 
 
+def plant_section(form: Mapping[str, Any], calibration_path: str | None) -> Any:
+    """The run's :class:`~pendulab.spec.Plant`: the chosen pendulum and cart, the chosen calibration."""
+    from pendulab.spec import Plant
+
+    return Plant(pendulum=_text(form, "pendulum") or "long", cart=_text(form, "cart") or "ip02",
+                 calibration=str(calibration_path) if calibration_path else None)
+
+
 def plant_parameters(form: Mapping[str, Any], calibration_path: str | None) -> Any:
     """Plant parameters of the chosen pendulum and cart with the chosen calibration applied."""
-    from pendulab.cli.options import plant_parameters_from_args
-
-    args = argparse.Namespace(pendulum=_text(form, "pendulum") or "long", cart=_text(form, "cart") or "ip02", calibration=calibration_path)
-    return plant_parameters_from_args(args)
+    return plant_section(form, calibration_path).parameters()
 
 
-def run_settings(form: Mapping[str, Any], calibration_path: str | None, calibration_label: str) -> RunSettings:
-    """Check the whole form before a run; the first mistake raises UserError (the command line's message)."""
-    from pendulab.cli.simulate import check_run_settings, parse_poke
+def run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
+    """The run the whole form describes, validated; the first mistake raises UserError (the command line's message)."""
+    from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
 
     controller = parse_controller_form(form.get("controller") or {})
     stop_time = _number(form.get("stop_time", 5), "stop time")
@@ -111,27 +92,24 @@ def run_settings(form: Mapping[str, Any], calibration_path: str | None, calibrat
     delay_value = _number(form.get("delay", 0), "transport delay")
     if delay_value != int(delay_value):
         raise UserError(f"transport delay {delay_value:g} must be a whole number of control periods")
-    delay = int(delay_value)
-    check_run_settings(stop_time, step, delay)
     method = _text(form, "method") or "tustin"
     if method not in ("tustin", "zoh"):
         raise UserError(f"discretization {method!r}: choose tustin or zoh")
+    timing = Timing(stop_time=stop_time, step=step, method=method, delay=int(delay_value))
+    timing.validate()
     poke_form = form.get("poke") or {}
-    poke = parse_poke(",".join(_text(poke_form, k) for k in ("magnitude", "duration", "start")))
-    if poke[2] >= stop_time:
-        raise UserError(f"the poke starts at t={poke[2]:g} s, not before the stop time {stop_time:g} s; start the poke earlier or lengthen the stop time")
-    params = plant_parameters(form, calibration_path)
-    params = params.with_values(poke_magnitude=poke[0], poke_duration=poke[1], poke_start=poke[2])
-    if not form.get("quantization", True):
-        params = params.with_values(q_alpha=0.0, q_x=0.0)
-    meta = {"pendulum": _text(form, "pendulum") or "long", "cart": _text(form, "cart") or "ip02", "calibration": calibration_label, "source": "simulation"}
-    supervisor: dict[str, Any] = {}
-    if form.get("recentre"):
-        supervisor["recentre"] = True
-    if form.get("swing_up"):
-        supervisor["swing_up"] = True
-    return RunSettings(controller, params, stop_time, step, method, delay, meta, supervisor,
-                       "hanging" if supervisor.get("swing_up") else "upright")
+    poke = Poke.parse(",".join(_text(poke_form, k) for k in ("magnitude", "duration", "start")))
+    # The supervisor's modes (issue 21); a swing-up starts hanging.
+    swing_up = bool(form.get("swing_up"))
+    plant = dataclasses.replace(plant_section(form, calibration_path), start="hanging" if swing_up else "upright")
+    spec = RunSpec(controller, plant=plant, poke=poke, timing=timing,
+                   quantization=Quantization(enabled=bool(form.get("quantization", True))),
+                   supervisor=Supervisor(recentre=bool(form.get("recentre")), swing_up=swing_up))
+    try:
+        return spec.validate()
+    except UserError as exc:
+        # The page names its fields, not the command line's options.
+        raise UserError(str(exc).replace("--stop-time", "the stop time")) from None
 
 
 def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[str, Any]:

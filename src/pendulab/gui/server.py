@@ -129,16 +129,18 @@ class GuiState:
                 raise UserError(f"cannot create the run folder {path}: {exc.strerror or exc}; start the GUI with another --out") from None
 
     def start(self, tab: str, form: dict[str, Any]) -> Run:
-        from pendulab.gui.app import run_settings
+        from pendulab.gui.app import run_spec
         from pendulab.gui.worker import run_simulation
 
-        path, label = self.calibration(form.get("calibration"))
-        settings = run_settings(form, path, label)
-        folder = self.new_folder(settings.meta["pendulum"])
-        label = f"{folder.name}: {settings.controller}, {settings.meta['pendulum']}, poke {settings.params.poke_magnitude:g}"
-        run = Run(secrets.token_hex(8), tab, "sim", folder, label, stop_time=settings.stop_time)
+        path, calibration_label = self.calibration(form.get("calibration"))
+        spec = run_spec(form, path)
+        pendulum = spec.plant.pendulum
+        folder = self.new_folder(pendulum)
+        label = f"{folder.name}: {spec.controller.transfer_function}, {pendulum}, poke {spec.poke.magnitude:g}"
+        run = Run(secrets.token_hex(8), tab, "sim", folder, label, stop_time=spec.timing.stop_time)
         q = self._context.Queue()
-        run.process = self._context.Process(target=run_simulation, args=(settings, str(folder), q), daemon=True)
+        meta = {"calibration": calibration_label, "source": "simulation"}
+        run.process = self._context.Process(target=run_simulation, args=(spec, meta, str(folder), q), daemon=True)
         run.process.start()
         with self.lock:
             self.runs[run.id] = run

@@ -7,17 +7,16 @@ from pathlib import Path
 from typing import Any
 
 
-def run_simulation(settings: Any, folder: str, queue: Any) -> None:
-    """Simulate, write ``run.mat``, ``run.csv``, ``metrics.json`` into ``folder``; report on ``queue``.
+def run_simulation(spec: Any, meta: Any, folder: str, queue: Any) -> None:
+    """Simulate ``spec`` (a RunSpec), write ``run.mat``, ``run.csv``, ``metrics.json`` (``meta`` added) into ``folder``; report on ``queue``.
 
     Messages: ``("progress", t)``, then ``("done", None)`` or ``("error", message)``.
     """
     from pendulab.errors import UserError
 
     try:
-        from pendulab.analysis.results import write_results
         from pendulab.cosim.master import SimulationError
-        from pendulab.cosim.pendulum import simulate_poke
+        from pendulab.simulation import simulate
 
         last = [0.0]
 
@@ -28,21 +27,10 @@ def run_simulation(settings: Any, folder: str, queue: Any) -> None:
                 queue.put(("progress", float(t)))
 
         try:
-            result = simulate_poke(
-                settings.controller,
-                settings.params,
-                stop_time=settings.stop_time,
-                step=settings.step,
-                method=settings.method,
-                meta=settings.meta,
-                progress=progress,
-                delay=settings.delay,
-                supervisor=settings.supervisor,
-                start=settings.start,
-            )
+            result = simulate(spec, progress=progress, meta=meta)
         except SimulationError as exc:
             raise UserError(f"the simulation failed: {exc}; check the controller, the poke and the parameters") from None
-        write_results(Path(folder), result.columns, result.meta, result.metrics)
+        result.write(Path(folder))
         queue.put(("done", None))
     except UserError as exc:
         queue.put(("error", str(exc)))

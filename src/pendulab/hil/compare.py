@@ -182,16 +182,14 @@ def compare_runs(paths: list[str | Path], out_dir: Path, *, Lp: float | None = N
     return text, [txt, png]
 
 
-def compare_with_simulation(out_dir: Path, controller: Any, params: Any, *, delay: int, method: str, metrics: Mapping[str, Any]) -> str:
-    """``pendulab lab --compare``: the matching simulation into ``out_dir/simulation``, then the comparison."""
-    from pendulab.analysis.results import write_results
-    from pendulab.cosim.pendulum import simulate_poke
+def compare_with_simulation(out_dir: Path, spec: Any, *, metrics: Mapping[str, Any]) -> str:
+    """``pendulab lab --compare``: the simulation of ``spec`` (a :class:`~pendulab.spec.RunSpec` at the rig's delay)
+    into ``out_dir/simulation``, then the comparison."""
+    from pendulab.simulation import simulate
 
     sim_dir = out_dir / "simulation"
-    stop = params.poke_start + 4.0
-    result = simulate_poke(controller, params, stop_time=stop, method=method, delay=delay,
-                           meta={"source": "simulation", "pendulum": "", "calibration": ""})
-    write_results(sim_dir, result.columns, result.meta, result.metrics)
-    text, _ = compare_runs([sim_dir, out_dir], out_dir, Lp=params.Lp)
+    result = simulate(spec, meta={"source": "simulation", "pendulum": "", "calibration": ""})
+    result.write(sim_dir)
+    text, _ = compare_runs([sim_dir, out_dir], out_dir, Lp=result.spec.parameters().Lp)
     print(text)
     return text

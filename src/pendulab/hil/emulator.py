@@ -67,20 +67,16 @@ class EmulatorOptions:
 
 
 class _Plant:
-    """Plant.fmu in Co-Simulation with cached C entry points; a hand can set its state (a restart)."""
+    """Plant.fmu as a :class:`~pendulab.cosim.component.Component`; a hand can set its state (a restart)."""
 
     STATE = ("x", "xdot", "alpha", "alphadot")
 
     def __init__(self, params: PlantParameters, period: float, state: tuple[float, float, float, float]) -> None:
-        from pendulab.cosim.master import Master
-        from pendulab.cosim.system import System
+        from pendulab.cosim.component import Component
         from pendulab.fmu.build import ensure_fmu
 
-        system = System(step=period)
-        system.add("plant", ensure_fmu("Plant"), {**params.as_dict(), **dict(zip(self.STATE, state))})
-        self.master = Master(system)
-        self.master.initialize(0.0)
-        self.inst = self.master.instances["plant"]
+        self.inst = Component("plant", ensure_fmu("Plant"), params.as_dict())
+        self.inst.setup(0.0, dict(zip(self.STATE, state)))
         self.params = params
         self.period = period
         self.t = 0.0
@@ -89,14 +85,13 @@ class _Plant:
 
     def restart(self, t: float, state: tuple[float, float, float, float], **changes: float) -> None:
         """Initialize again at time ``t`` in ``state`` (x, xdot, alpha, alphadot), parameters changed by ``changes``."""
-        self.master.reinitialize("plant", t, {**changes, **dict(zip(self.STATE, state))})
+        self.inst.reset(t, {**changes, **dict(zip(self.STATE, state))})
         self.t = t
 
     def step(self, voltage: float) -> None:
         self._v.values["Real"][0] = voltage
         self.inst.write(self._v)
-        if self.inst.do_step(self.inst.handle, self.t, self.period, 1) > 1:
-            raise RuntimeError(f"the plant FMU failed at t={self.t:.3f} s")
+        self.inst.step(self.t, self.period)
         self.t += self.period
 
     def state(self) -> tuple[float, float, float, float, float]:
@@ -104,7 +99,7 @@ class _Plant:
         return tuple(self._state.values["Real"])  # type: ignore[return-value]
 
     def close(self) -> None:
-        self.master.close()
+        self.inst.close()
 
 
 class RigEmulator:

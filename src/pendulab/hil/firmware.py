@@ -6,21 +6,27 @@ its pins wired to the plant (Plant.fmu's own CasADi-generated C code). Linux onl
 
 Examples
 --------
->>> from pendulab.hil.firmware import build_twin, twin_command
->>> hex_path, twin = build_firmware(), build_twin()                     # doctest: +SKIP
->>> twin_command(hex_path, ["--raise-after", "2"])                      # doctest: +SKIP
-['.../pendulab-twin', '.../pendulab-rig.hex', '--params', '0.23,...', '--raise-after', '2']
+>>> from pendulab.hil.emulator import EmulatorOptions
+>>> from pendulab.hil.firmware import build_firmware, build_twin, twin_command
+>>> # skipped: building needs make, gcc-avr and simavr (tests/test_firmware*.py build them)
+>>> hex_path, twin = build_firmware(), build_twin()     # doctest: +SKIP
+>>> twin_command(Path("rig.hex"), EmulatorOptions(raise_after=2.0))[1:3]
+['rig.hex', '--params']
 """
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from pendulab.errors import UserError
+
+if TYPE_CHECKING:
+    from pendulab.hil.emulator import EmulatorOptions
 
 REPO = Path(__file__).resolve().parents[3]
 FIRMWARE_DIR = REPO / "firmware"
@@ -71,83 +77,62 @@ def idle_loop_range(elf: Path | None = None) -> tuple[int, int]:
     return symbols["idle_begin"], symbols["idle_end"]
 
 
-def twin_parser() -> argparse.ArgumentParser:
-    """The options the twin takes from ``pendulab rig-emulator``: the plant and the person."""
-    from pendulab.cli.options import add_plant_options
-
-    parser = argparse.ArgumentParser(prog="pendulab rig-emulator --firmware", add_help=False)
-    add_plant_options(parser, pendulums=("long", "short", "none"))
-    parser.add_argument("--friction", metavar="F1,v1,F2,v2,B")
-    parser.add_argument("--raise-after", type=float)
-    parser.add_argument("--poke")
-    parser.add_argument("--seed", type=int)
-    parser.add_argument("--restart-after", type=float)
-    parser.add_argument("--fault-after", type=float)
-    parser.add_argument("--close-after", type=float)
-    parser.add_argument("--byte-error-rate", type=float, default=0.0)
-    return parser
+#: Emulator options (:class:`~pendulab.hil.emulator.EmulatorOptions`) that model a host-side link the twin
+#: does not have, by the command line's names.
+UNSUPPORTED = {"latency": "--latency", "jitter": "--jitter", "stall_after": "--stall-after"}
 
 
-#: rig-emulator options that model a host-side link the twin does not have.
-UNSUPPORTED = ("--latency", "--jitter", "--stall-after", "--stall-for", "--tcp")
-
-
-def twin_command(hex_path: Path, argv: list[str]) -> list[str]:
-    """The twin's command line for the firmware ``hex_path`` and rig-emulator options ``argv``."""
-    import math
-
-    from pendulab.cli.options import plant_parameters_from_args
-
-    for option in UNSUPPORTED:
-        if any(a == option or a.startswith(option + "=") for a in argv):
+def check_twin_options(options: EmulatorOptions) -> None:
+    """Refuse (UserError) the options the twin does not model: a latency, jitter or stall of the link."""
+    defaults = type(options)()
+    for name, option in UNSUPPORTED.items():
+        if getattr(options, name) != getattr(defaults, name):
             raise UserError(f"{option} is not available with --firmware (the twin's link is the firmware's own UART); drop it")
-    # '--firmware HEX' may leave the path behind as a positional: it is the firmware, not an option.
-    argv = [a for a in argv if a != str(hex_path)]
-    args, rest = twin_parser().parse_known_args(argv)
-    if rest:
-        raise UserError(f"unknown option {rest[0]!r} for the firmware twin; see 'pendulab rig-emulator --help'")
-    params = plant_parameters_from_args(args)
-    if args.friction:
-        try:
-            values = [float(v) for v in args.friction.split(",")]
-        except ValueError:
-            values = []
-        if len(values) != 5 or not all(math.isfinite(v) and v >= 0 for v in values):
-            raise UserError(f"--friction {args.friction!r} must be five numbers >= 0: F1,v1,F2,v2,B")
-        params = params.with_values(**dict(zip(("F1", "v1", "F2", "v2", "B"), values)))
-    command = [str(TWIN), str(hex_path), "--params", ",".join(repr(float(v)) for v in params.as_vector())]
-    for name in ("raise_after", "restart_after", "fault_after", "close_after"):
-        value = getattr(args, name)
-        if value is not None:
-            if not (math.isfinite(value) and value >= 0):
-                raise UserError(f"--{name.replace('_', '-')} {value} must be a number >= 0")
-            command += ["--" + name.replace("_", "-"), repr(value)]
-    if args.poke:
-        from pendulab.cli.simulate import parse_poke
 
-        command += ["--poke", ",".join(repr(v) for v in parse_poke(args.poke))]
-    if not 0 <= args.byte_error_rate < 0.5:
-        raise UserError(f"--byte-error-rate {args.byte_error_rate} must be a probability from 0 to below 0.5, e.g. 1e-3")
-    if args.byte_error_rate:
-        command += ["--byte-error-rate", repr(args.byte_error_rate)]
-    if args.seed is not None:
-        command += ["--seed", str(args.seed)]
+
+def twin_command(hex_path: Path, options: EmulatorOptions) -> list[str]:
+    """The twin's command line for the firmware ``hex_path`` and the rig ``options``.
+
+    ``options`` are the rig emulator's (the plant's parameters and what a person does); the twin's
+    link is the firmware's own UART, so a latency, jitter or stall is refused (UserError).
+
+    Examples
+    --------
+    >>> from pendulab.hil.emulator import EmulatorOptions
+    >>> command = twin_command(Path("rig.hex"), EmulatorOptions(raise_after=2.0, seed=7))
+    >>> command[1:3], command[4:]
+    (['rig.hex', '--params'], ['--raise-after', '2.0', '--seed', '7'])
+    """
+    import dataclasses
+
+    check_twin_options(options)
+    command = [str(TWIN), str(hex_path), "--params", ",".join(repr(float(v)) for v in options.params.as_vector())]
+    for field in dataclasses.fields(options):
+        if field.name in ("raise_after", "restart_after", "fault_after", "close_after") and getattr(options, field.name) is not None:
+            command += ["--" + field.name.replace("_", "-"), repr(float(getattr(options, field.name)))]
+    if options.poke is not None:
+        command += ["--poke", ",".join(repr(float(v)) for v in options.poke)]
+    if options.byte_error_rate:
+        command += ["--byte-error-rate", repr(options.byte_error_rate)]
+    if options.seed is not None:
+        command += ["--seed", str(options.seed)]
     return command
 
 
-def run_twin(hex_path: Path | None, argv: list[str]) -> int:
+def run_twin(hex_path: Path | None, options: EmulatorOptions) -> int:
     """Run the firmware in the twin in the foreground (``pendulab rig-emulator --firmware [HEX]``).
 
     Builds the firmware (``make -C firmware``) if ``hex_path`` is None and it is missing, builds the twin,
-    passes the plant and person options in ``argv`` through, and returns the twin's exit status. The twin
+    gives it the plant and person ``options`` (:func:`twin_command`), and returns the twin's exit status. The twin
     prints the pseudo-terminal's path alone on the first line of stdout and one line per change of
     state on stderr.
     """
+    check_twin_options(options)
     if hex_path is None:
         hex_path = build_firmware()
     elif not Path(hex_path).is_file():
         raise UserError(f"firmware {hex_path} not found; build it with 'make -C firmware' or leave --firmware without a file")
-    command = twin_command(Path(hex_path), argv)
+    command = twin_command(Path(hex_path), options)
     build_twin()
     import signal
 

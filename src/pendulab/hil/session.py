@@ -23,7 +23,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from pendulab.cosim.master import Master, _Port
+from pendulab.cosim.component import Port, SimulationError
+from pendulab.cosim.master import Master
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
 from pendulab.fmu.models.supervisor.config import COMMANDS, KEYS, RUNNING, STATES, TRIP_REASONS, TRIPPED, rig_to_upright
@@ -143,8 +144,8 @@ class LabSession:
         self.order = [name for name in self.system.components if name != RIG]
         # Each input and output with its place in its port's buffers, found once (not per sample).
         Slot = tuple[str, str, int]  # "component.variable", base type, index in the port's buffer
-        self.inputs: dict[str, tuple[_Port, list[tuple[Slot, Callable[[float], float] | None]]]] = {}
-        self.outputs: dict[str, tuple[_Port, list[Slot]]] = {}
+        self.inputs: dict[str, tuple[Port, list[tuple[Slot, Callable[[float], float] | None]]]] = {}
+        self.outputs: dict[str, tuple[Port, list[Slot]]] = {}
         for name in self.order:
             inst = master.instances[name]
             conns = [c for c in self.system.connections if c.target == name]
@@ -310,14 +311,15 @@ class LabSession:
                     self.reason = f"stop time {self.stop_time:g} s reached"
                     status = 0
                     break
-                sup_step = sup.do_step(sup.handle, t, self.period, 1)
-                ctrl_step = ctrl.do_step(ctrl.handle, t, self.period, 1) if state == RUNNING else 0
-                if sup_step > 1 or ctrl_step > 1:
-                    raise RigFault(f"the {'supervisor' if sup_step > 1 else 'controller'} FMU failed at t = {t:.3f} s")
+                sup.step(t, self.period)
+                if state == RUNNING:
+                    ctrl.step(t, self.period)
         except KeyboardInterrupt:
             self.reason, status = "interrupted (Ctrl-C)", 130
         except (LinkLost, RigRestarted, RigFault) as exc:
             self.reason, status = str(exc), 1
+        except SimulationError as exc:
+            self.reason, status = f"an FMU failed: {exc}", 1
         except UserError:
             raise
         except Exception as exc:  # noqa: BLE001 - any error: motor off, log kept, reason recorded

@@ -64,6 +64,22 @@ def linearize(params: PlantParameters | None = None) -> LinearPlant:
 
     Friction, quantization, the current limit and the poke are switched off first (they are not
     differentiable at the equilibrium, or are not part of the plant's small-signal behaviour).
+
+    Parameters
+    ----------
+    params : PlantParameters, optional
+        The plant (default: long pendulum, IP02 cart without load).
+
+    Returns
+    -------
+    LinearPlant
+        ``.ss`` (python-control state space), ``.tf(output)``, ``.zpk(output)``.
+
+    Examples
+    --------
+    >>> lin = linearize(PlantParameters.preset("short"))
+    >>> lin.ss.nstates, lin.ss.ninputs, lin.ss.noutputs
+    (4, 1, 3)
     """
     params = (params or PlantParameters.preset()).without_nonlinearities()
     ode = PlantModel().ode
@@ -78,6 +94,30 @@ def linearize(params: PlantParameters | None = None) -> LinearPlant:
     C[2, 2] = params.Lp  # tip = Lp * alpha (arc length at the tip)
     ss = control.ss(A, B, C, np.zeros((3, 1)), states=list(STATES), inputs=["V"], outputs=list(OUTPUT_NAMES), name="plant")
     return LinearPlant(ss=ss, params=params)
+
+
+def tf(params: PlantParameters | None = None, output: str = "alpha") -> control.TransferFunction:
+    """The plant's minimal transfer function from the voltage ``V`` to ``output``, linearized upright.
+
+    Parameters
+    ----------
+    params : PlantParameters, optional
+        The plant (default: long pendulum, IP02 cart without load); a calibrated plant gives the
+        calibrated transfer function.
+    output : {"alpha", "x", "tip"}
+        Pendulum angle (rad), cart position (m) or tip position ``Lp*alpha`` (m).
+
+    Returns
+    -------
+    control.TransferFunction
+
+    Examples
+    --------
+    >>> g = tf()                                      # alpha/V, the lab's 5.247 s / ((s+16.26)(s+4.561)(s-4.843))
+    >>> [round(float(c), 3) for c in g.num[0][0]]
+    [5.247, 0.0]
+    """
+    return linearize(params).tf(output)
 
 
 def _trim(coefficients: np.ndarray) -> np.ndarray:

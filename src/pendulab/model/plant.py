@@ -404,7 +404,7 @@ class PlantModel:
         n_sub = substeps(step, substep)
         h = step / n_sub
         # The mapped function integrates one communication step per call (fast in CasADi's VM).
-        one_step = _step_function(self.smooth_friction, n_sub)
+        one_step = step_function(self.smooth_friction, n_sub)
         p = np.asarray(params.as_vector())
         out = np.empty((len(V) + 1, 4))
         out[0] = x0
@@ -479,7 +479,22 @@ def _regime_functions() -> tuple[ca.Function, ca.Function, ca.Function]:
 
 
 @lru_cache(maxsize=None)
-def _step_function(smooth_friction: bool, n_sub: int) -> ca.Function:
+def step_function(smooth_friction: bool, n_sub: int) -> ca.Function:
+    """``n_sub`` RK4 sub-steps of the plant as one CasADi function ``plant_step(state, V, p, t, h) -> state``.
+
+    Parameters
+    ----------
+    smooth_friction : bool
+        The smoothed stick-slip law (for fitting) instead of the true one.
+    n_sub : int
+        Number of RK4 sub-steps of length ``h`` (see :func:`substeps`).
+
+    Examples
+    --------
+    >>> step = step_function(False, 2)
+    >>> step.name(), step.n_in()
+    ('plant_step', 5)
+    """
     rk4 = _functions(smooth_friction)[2]
     state = ca.MX.sym("state", 4)
     V, t, h = ca.MX.sym("V"), ca.MX.sym("t"), ca.MX.sym("h")

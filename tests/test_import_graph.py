@@ -1,0 +1,95 @@
+"""The package's import graph: the command line and the GUI are leaves, and no package reaches into
+another's private names (issue 18).
+
+Read from the source with :mod:`ast` (every ``import`` and ``from ... import``, at any depth, lazy
+imports inside functions included), so the test sees imports that a run would only reach late.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "src" / "pendulab"
+#: The entry points: ``python -m pendulab`` runs the command line, whose ``gui`` command starts the GUI.
+ENTRY_POINTS = {"pendulab.__main__": {"pendulab.cli"}, "pendulab.cli": {"pendulab.gui"}}
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports(path: Path) -> list[tuple[int, str, list[str]]]:
+    """``(line, module, names)`` for every import in the file (relative imports resolved)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    here = module_name(path).split(".") if path.is_relative_to(PACKAGE) else [path.stem]
+    if path.name != "__init__.py":
+        here = here[:-1]
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name, []) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(here[: len(here) - node.level + 1] + ([base] if base else []))
+            found.append((node.lineno, base, [alias.name for alias in node.names]))
+    return found
+
+
+def package_of(module: str) -> str:
+    """``pendulab.<package>`` (or the top-level module) a module belongs to."""
+    return ".".join(module.split(".")[:2])
+
+
+SOURCES = sorted(PACKAGE.rglob("*.py"))
+
+
+def test_the_graph_is_read_from_every_module():
+    names = {module_name(p) for p in SOURCES}
+    assert {"pendulab.cli.main", "pendulab.gui.app", "pendulab.spec", "pendulab.simulation"} <= names
+    # The reader resolves relative imports and sees imports inside functions.
+    found = {m for p in SOURCES if module_name(p) == "pendulab.cli.simulate" for _, m, _ in imports(p)}
+    assert "pendulab.simulation" in found  # imported inside run()
+
+
+@pytest.mark.parametrize("leaf", ["pendulab.cli", "pendulab.gui"])
+def test_nothing_imports_the_command_line_or_the_gui(leaf):
+    offenders = []
+    for path in SOURCES:
+        me = module_name(path)
+        if package_of(me) == leaf or leaf in ENTRY_POINTS.get(package_of(me), set()) or leaf in ENTRY_POINTS.get(me, set()):
+            continue
+        for line, module, names in imports(path):
+            targets = [module] + [f"{module}.{n}" for n in names]
+            if any(t == leaf or t.startswith(leaf + ".") for t in targets):
+                offenders.append(f"{path.relative_to(ROOT)}:{line} imports {module}")
+    for path in sorted((ROOT / "examples").glob("*.py")) + sorted((ROOT / "bench").glob("*.py")):
+        for line, module, _ in imports(path):
+            if module == leaf or module.startswith(leaf + "."):
+                offenders.append(f"{path.relative_to(ROOT)}:{line} imports {module}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_no_package_imports_another_packages_private_names():
+    offenders = []
+    for path in SOURCES + sorted((ROOT / "examples").glob("*.py")):
+        me = module_name(path) if path.is_relative_to(PACKAGE) else "examples"
+        for line, module, names in imports(path):
+            if not module.startswith("pendulab") or package_of(module) == package_of(me):
+                continue
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+            private += [part for part in module.split(".")[2:] if part.startswith("_") and not part.startswith("__")]
+            if private:
+                offenders.append(f"{path.relative_to(ROOT)}:{line} imports {', '.join(private)} from {module}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_the_bench_does_not_import_the_tests():
+    for path in sorted((ROOT / "bench").glob("*.py")):
+        for line, module, _ in imports(path):
+            assert module.split(".")[0] != "tests", f"{path.name}:{line} imports {module}"
