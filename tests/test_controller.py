@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import doctest
 import json
 import os
 
@@ -10,9 +9,6 @@ import control
 import numpy as np
 import pytest
 
-import pendulab.control
-import pendulab.control.controller as controller_module
-import pendulab.control.files as files_module
 from pendulab.control.controller import (
     Controller,
     Factor,
@@ -43,12 +39,6 @@ def one_line_error(excinfo: pytest.ExceptionInfo) -> str:
     assert "\n" not in message and message.strip() == message and message
     assert isinstance(excinfo.value, UserError)
     return message
-
-
-@pytest.mark.parametrize("module", [controller_module, files_module, pendulab.control])
-def test_docstring_examples(module):
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
-    assert result.failed == 0 and result.attempted > 0
 
 
 # ------------------------------------------------------------------------------ numbers and text

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import doctest
 
 import casadi as ca
 import control
 import numpy as np
 import pytest
 
-import pendulab.control.loop as loop_module
 from pendulab.control.controller import Controller, Factor, demo_controller, unstable_example
 from pendulab.control.loop import closed_loop_poles, poke_response, sampled_plant
 from pendulab.control.realization import discretize
@@ -32,11 +30,6 @@ def reference_loop_poles(controller: Controller, params: PlantParameters, delay:
 
 def continuous_equivalents(z: np.ndarray) -> np.ndarray:
     return np.log(z.astype(complex)) / H
-
-
-def test_docstring_examples():
-    result = doctest.testmod(loop_module)
-    assert result.failed == 0 and result.attempted > 0
 
 
 @pytest.mark.parametrize("pendulum", PENDULUMS)

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import doctest
 
 import pytest
 
-import pendulab.control.prompt as prompt_module
 from pendulab.control.controller import Controller, Factor, demo_controller
 from pendulab.control.prompt import DEFAULT_POKE, prompt_simulation
 from pendulab.spec import Poke, RunSpec
@@ -42,11 +40,6 @@ class Script:
 
 DEFAULTS = ["", "", "", "", ""]  # pendulum, calibration, poke magnitude, duration, start
 DEMO = ["-5", "7", "40000", "a", "-17", "-80", "", "a", "none", "-80", "", "f"]
-
-
-def test_docstring_example():
-    result = doctest.testmod(prompt_module)
-    assert result.failed == 0 and result.attempted > 0
 
 
 def test_demo_controller_with_defaults():

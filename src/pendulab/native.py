@@ -18,6 +18,7 @@ Examples
 --------
 >>> from pathlib import Path
 >>> from pendulab.native import shared_library
+>>> # skipped: the path and whether it was built depend on the machine
 >>> lib = shared_library(Path("plan_runner.c"))        # prebuilt, cached, or compiled now   # doctest: +SKIP
 >>> lib.path, lib.built                                  # doctest: +SKIP
 (PosixPath('/home/me/.cache/pendulab/native/plan_runner-3f2a9c1d0b7e.so'), False)

@@ -43,6 +43,13 @@ class SimulationResult:
         What the ``meta`` struct of ``run.mat`` holds.
     spec : RunSpec or None
         The run's description.
+
+    Examples
+    --------
+    >>> import pendulab
+    >>> result = pendulab.simulate(pendulab.RunSpec(pendulab.demo_controller(), timing=pendulab.Timing(stop_time=1.5)))
+    >>> sorted(result.columns)[:3], result.meta["run"] == result.spec.to_json()
+    (['alpha', 'alpha_measured', 'supervisor_state'], True)
     """
 
     columns: dict[str, np.ndarray]
@@ -97,6 +104,15 @@ def simulate(
         The spec breaks a rule.
     pendulab.cosim.master.SimulationError
         An FMU refused a step (e.g. a poke so large that the state overflows).
+
+    Examples
+    --------
+    >>> import pendulab
+    >>> spec = pendulab.RunSpec(pendulab.pid(600, 200, 5), poke=pendulab.Poke(220.0, 0.005, 0.5),
+    ...                         timing=pendulab.Timing(stop_time=1.5, delay=2))
+    >>> result = pendulab.simulate(spec)
+    >>> float(result.columns["t"][-1]), result.metrics["peak_time_s"] < 0.1
+    (1.5, True)
     """
     from pendulab.analysis.metrics import compute_metrics
     from pendulab.cosim.master import Master, SimulationError

@@ -104,6 +104,13 @@ class Plant:
         the preset and the calibration.
     start : {"upright", "hanging"}
         The pendulum at t = 0: upright at rest (default), or hanging at rest (for ``supervisor.swing_up``).
+
+    Examples
+    --------
+    >>> plant = Plant(pendulum="short", overrides={"Beq": 5.0})
+    >>> params = plant.parameters()
+    >>> params.Lp, params.Beq
+    (0.3365, 5.0)
     """
 
     kind: str = _choice(*PLANT_KINDS, default="pendulum")
@@ -163,6 +170,14 @@ class ControllerSpec:
         Start values of the block FMU's parameters.
     label : str, optional
         How the run's files name the controller (default: ``G(s)`` written out, or the block's name).
+
+    Examples
+    --------
+    >>> from pendulab.control import Controller
+    >>> ControllerSpec(transfer_function=Controller.pid(40, 5, 4)).fmu is None
+    True
+    >>> ControllerSpec(fmu="fmus/LQRController.fmu", parameters={"K_x": -10.0}).parameters["K_x"]
+    -10.0
     """
 
     transfer_function: Any = None
@@ -177,7 +192,22 @@ class ControllerSpec:
 
 @dataclass(frozen=True)
 class Poke:
-    """A rectangular pulse added to the pendulum's angular acceleration (SPEC §2)."""
+    """A rectangular pulse added to the pendulum's angular acceleration (SPEC §2).
+
+    Parameters
+    ----------
+    magnitude : float
+        rad/s^2 (default 50; 220 gives a response of the size seen on the rig).
+    duration : float
+        s (default 0.005).
+    start : float
+        s (default 1.0); before the run's stop time.
+
+    Examples
+    --------
+    >>> Poke(220.0)
+    Poke(magnitude=220.0, duration=0.005, start=1.0)
+    """
 
     magnitude: float = POKE_DEFAULT[0]
     duration: float = POKE_DEFAULT[1]
@@ -211,7 +241,27 @@ class Poke:
 
 @dataclass(frozen=True)
 class Timing:
-    """Stop time (s), control period ``step`` (s), discretization and transport delay (periods)."""
+    """When the run ends, its control period, the discretization and the transport delay.
+
+    Parameters
+    ----------
+    stop_time : float
+        Simulated time in s (default 5).
+    step : float
+        Control period in s, the co-simulation's macro step (default 0.001; at most 0.1).
+    method : {"tustin", "zoh"}
+        Discretization of the controller (default Tustin).
+    delay : int
+        Transport delay before the plant in control periods, as on the rig (default 0).
+
+    Examples
+    --------
+    >>> Timing(stop_time=10.0, delay=2).validate()
+    >>> Timing(step=0.5).validate()
+    Traceback (most recent call last):
+        ...
+    pendulab.errors.UserError: --step 0.5 must be within (0, 0.1] s; the lab runs at 0.001
+    """
 
     stop_time: float = 5.0
     step: float = 1e-3
@@ -238,7 +288,21 @@ class Timing:
 
 @dataclass(frozen=True)
 class Quantization:
-    """The encoders: quantized (default) or ideal; steps override the preset's ``q_alpha``/``q_x``."""
+    """The encoders: quantized (default) or ideal.
+
+    Parameters
+    ----------
+    enabled : bool
+        ``False``: ideal encoders (both steps 0).
+    q_alpha, q_x : float, optional
+        Encoder steps (rad, m) instead of the preset's (e.g. ``2*pi/4096`` for the real IP02).
+
+    Examples
+    --------
+    >>> import math
+    >>> RunSpec(quantization=Quantization(q_alpha=2 * math.pi / 4096)).parameters().q_alpha
+    0.0015339807878856412
+    """
 
     enabled: bool = True
     q_alpha: float | None = None
@@ -273,6 +337,11 @@ class Supervisor:
         The angle input is the rig's encoder (0 hanging down); engage inside the capture window.
     auto_start : bool, optional
         Start at initialization (simulation, default) or wait for the start command (lab).
+
+    Examples
+    --------
+    >>> RunSpec(supervisor=Supervisor(x_max=0.35, recentre=True)).supervisor_parameters()
+    {'x_max': 0.35, 'recentre': True}
     """
 
     alpha_max: float | None = None

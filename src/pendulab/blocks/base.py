@@ -132,11 +132,30 @@ class Block(Fmi2Slave):
     author, version : str, optional
         Written to the model description; the class docstring's first line is its description.
 
+    Parameters
+    ----------
+    **kwargs
+        pythonfmu's instance arguments (``instance_name``, ...); the FMU passes them.
+
     Notes
     -----
     Keep a block's state in attributes you reassign (floats, tuples): when a master changes an
     input after the outputs were computed at the same point, the block restores its attributes
     (a shallow copy taken before :meth:`step`) and samples again.
+
+    Examples
+    --------
+    >>> class Doubler(Block):
+    ...     '''Twice the input.'''
+    ...     inputs = {"u": Var(0.0, "V", "Input")}
+    ...     outputs = {"y": Var(0.0, "V", "2 u")}
+    ...
+    ...     def step(self, t, h):
+    ...         self.y = 2 * self.u
+    >>> sorted(Doubler.parameters) + sorted(Doubler.BASE_PARAMETERS)
+    ['h']
+
+    The module docstring runs a block by hand; :func:`pendulab.blocks.build_block` makes it an FMU.
     """
 
     inputs: ClassVar[dict[str, Var]] = {}

@@ -17,6 +17,7 @@ with ``fmpy.validation.validate_fmu`` and writes the FMU atomically.
 Examples
 --------
 >>> from pendulab.blocks import build_block
+>>> # skipped: the files are yours (build_block's own example builds one)
 >>> fmu = build_block("gain.py", "fmus/")                                  # doctest: +SKIP
 >>> fmu = build_block(LQRController, "fmus/", start_values={"K_x": -10})   # doctest: +SKIP
 """
@@ -86,6 +87,14 @@ def build_block(
     ------
     UserError
         The file or class is not a usable block, or a start value names no parameter or input.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pendulab.blocks.lqr import LQRController
+    >>> fmu = build_block(LQRController, tempfile.mkdtemp(), start_values={"K_x": -10.0})
+    >>> fmu.name
+    'LQRController.fmu'
     """
     cls, copies = _resolve(block)
     starts = _check_start_values(cls, start_values or {})

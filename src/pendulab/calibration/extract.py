@@ -41,8 +41,8 @@ Examples
 >>> with VirtualRig(friction=(2.0, 0.004, 3.6, 0.06, 25.0)) as rig:
 ...     log = run_ramp_test(rig, iterations=1)
 >>> est = extract_friction(log)
->>> [round(v, 2) for v in est.friction]      # doctest: +SKIP
-[2.01, 0.0, 3.6, 0.06, 24.92]
+>>> bool(abs(est.friction[0] - 2.0) < 0.1), bool(abs(est.friction[2] - 3.6) < 0.2)
+(True, True)
 """
 
 from __future__ import annotations

@@ -185,6 +185,23 @@ def _validate(friction: Mapping[str, Any], fitted: Mapping[str, Any], source: st
 def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     """Read a calibration file: JSON (``.json`` or anything else) or the old lab's MATLAB ``.mat``.
 
+    Parameters
+    ----------
+    path : path
+        The file (``calibration/default.json`` holds the lab's table).
+
+    Returns
+    -------
+    Calibration
+        ``.apply(params)`` puts its values into a :class:`~pendulab.model.parameters.PlantParameters`.
+
+    Examples
+    --------
+    >>> from pendulab.model.parameters import PlantParameters
+    >>> calibration = load_calibration(DEFAULT_CALIBRATION_PATH)
+    >>> calibration.apply(PlantParameters.preset()).friction
+    (1.5, 0.005, 3.0, 0.05, 20.0)
+
     Raises
     ------
     CalibrationError

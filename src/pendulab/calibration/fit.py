@@ -73,6 +73,7 @@ Examples
 >>> true = PlantParameters.preset("none", Beq=5.0, force_gain=0.9)
 >>> with VirtualRig(true) as rig:
 ...     log = run_ramp_test(rig, iterations=1)
+>>> # skipped: a fit compiles its replay and takes tens of seconds (tests/test_fit*.py run it)
 >>> result = fit_parameters([log], PlantParameters.preset("none"))   # doctest: +SKIP
 >>> round(result.values["Beq"], 1), round(result.values["force_gain"], 2)  # doctest: +SKIP
 (5.0, 0.9)
@@ -459,9 +460,21 @@ def fit_parameters(
         from the logs themselves (:mod:`pendulab.calibration._start`: the drive and the drag from
         fast motion, the breakaway force from the rests). Not for logs with the pendulum.
 
+    on_progress : callable, optional
+        Called with a line of text at each stage.
+    verbose : bool
+        Print the solver's output.
+    max_iter, tolerance
+        The smoothed fit's Gauss-Newton iterations and their tolerance.
+
     Returns
     -------
     FitResult
+
+    Examples
+    --------
+    >>> # skipped: a fit compiles its replay and takes tens of seconds (tests/test_fit*.py run it)
+    >>> result = fit_parameters([read_log("ramp.csv")])       # doctest: +SKIP
     """
     from pendulab.calibration import _polish, _replay
     from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem

@@ -138,7 +138,25 @@ def _pick(names: Sequence[str], available: Sequence[str]) -> str | None:
 
 
 def read_log(path: str | os.PathLike[str]) -> RampLog:
-    """Read a CSV log or a ``run.mat`` (see the module docstring).
+    """Read a CSV log or a ``run.mat`` (see the module docstring), or a folder of the old lab's logs.
+
+    Parameters
+    ----------
+    path : path
+        ``.csv`` (columns ``t``, ``V``/``voltage``, ``x``, optional ``alpha``), a ``run.mat``, or a folder.
+
+    Returns
+    -------
+    RampLog
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "log.csv"
+    >>> _ = path.write_text("t,V,x\\n0,0,0\\n0.001,0.5,0\\n0.002,1.0,2.275e-05\\n")
+    >>> log = read_log(path)
+    >>> log.period, float(log.x[-1])
+    (0.001, 2.275e-05)
 
     Raises
     ------

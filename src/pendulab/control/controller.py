@@ -310,6 +310,11 @@ def _json_number(value: Number) -> float | list[float]:
 class Controller:
     """``G(s) = G1(s)·…·Gn(s)``: a kernel ``factors[0]`` and up to five compensators.
 
+    Parameters
+    ----------
+    factors : iterable of Factor
+        The kernel (its gain is the controller's gain), then the compensators; at most six.
+
     Examples
     --------
     >>> c = Controller([Factor([-5], [7], 40000), Factor([-17], [-80]), Factor([], [-80])])
@@ -737,6 +742,11 @@ def demo_controller(pendulum: str = "long") -> Controller:
     """A controller that balances both pendulums: ``40000 (s+5)(s+17) / ((s-7)(s+80)^2)``.
 
     Kernel ``40000 (s+5)/(s-7)``, compensators ``(s+17)/(s+80)`` and ``1/(s+80)``.
+
+    Examples
+    --------
+    >>> print(demo_controller())
+    40000 (s + 5)(s + 17) / ((s - 7)(s + 80)^2)
 
     The plant ``alpha/V`` has a zero at ``s = 0`` and one unstable pole (``+4.84`` long, ``+6.40``
     short), so only an *unstable* controller can stabilize the tip loop (parity interlacing): the

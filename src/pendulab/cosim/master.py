@@ -6,9 +6,15 @@ step itself).
 
 Examples
 --------
+>>> from pendulab.control import demo_controller, discretize
 >>> from pendulab.cosim.master import Master
->>> with Master(system) as master:                       # doctest: +SKIP
-...     log = master.run(stop_time=5.0, record=["plant.x", "supervisor.state"])
+>>> from pendulab.cosim.pendulum import pendulum_system
+>>> from pendulab.model.parameters import PlantParameters
+>>> system = pendulum_system(PlantParameters.preset(), discretize(demo_controller(), h=1e-3).to_parameters())
+>>> with Master(system) as master:
+...     log = master.run(stop_time=0.5, record=["plant.x", "supervisor.state"])
+>>> len(log["time"]), sorted(log)
+(501, ['plant.x', 'supervisor.state', 'time'])
 """
 
 from __future__ import annotations

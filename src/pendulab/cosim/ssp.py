@@ -14,7 +14,13 @@ them at once, e.g. Ecos with ``EcosSimulation(ssp_path=..., step_size=1e-3).init
 
 Examples
 --------
->>> export_ssp(system, "runs/demo/loop.ssp")          # doctest: +SKIP
+>>> import tempfile
+>>> from pendulab.control import demo_controller, discretize
+>>> from pendulab.cosim.pendulum import pendulum_system
+>>> from pendulab.model.parameters import PlantParameters
+>>> system = pendulum_system(PlantParameters.preset(), discretize(demo_controller(), h=1e-3).to_parameters())
+>>> export_ssp(system, Path(tempfile.mkdtemp()) / "loop.ssp").name
+'loop.ssp'
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@
 Examples
 --------
 >>> system = System(step=1e-3)
->>> system.add("plant", "fmus/Plant.fmu")
->>> system.add("controller", "fmus/Controller.fmu")
->>> system.connect("plant.alpha_measured", "controller.alpha_measured")
+>>> plant = system.add("plant", "fmus/Plant.fmu")
+>>> controller = system.add("controller", "fmus/Controller.fmu")
+>>> connection = system.connect("plant.alpha_measured", "controller.alpha_measured")
 >>> [str(c) for c in system.connections]
 ['plant.alpha_measured -> controller.alpha_measured']
 """
@@ -20,7 +20,7 @@ from pendulab.errors import UserError
 
 
 @dataclass
-class Component:
+class ComponentSpec:
     """One FMU instance in a system."""
 
     name: str
@@ -55,13 +55,13 @@ class System:
     """
 
     step: float = 1e-3
-    components: dict[str, Component] = field(default_factory=dict)
+    components: dict[str, ComponentSpec] = field(default_factory=dict)
     connections: list[Connection] = field(default_factory=list)
 
-    def add(self, name: str, fmu: str | Path, start_values: dict[str, Any] | None = None) -> Component:
+    def add(self, name: str, fmu: str | Path, start_values: dict[str, Any] | None = None) -> ComponentSpec:
         if name in self.components:
             raise UserError(f"component {name!r} is already in the system; give each component its own name")
-        component = Component(name, Path(fmu), dict(start_values or {}))
+        component = ComponentSpec(name, Path(fmu), dict(start_values or {}))
         self.components[name] = component
         return component
 

@@ -231,7 +231,7 @@ def ensure_fmu(name: str, out_dir: Path | None = None, *, progress: Callable[[st
 
     Examples
     --------
-    >>> ensure_fmu("Plant").name                                   # doctest: +SKIP
+    >>> ensure_fmu("Plant").name
     'Plant.fmu'
     """
     found = find_fmu(name, out_dir)

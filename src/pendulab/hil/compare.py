@@ -2,6 +2,7 @@
 
 Examples
 --------
+>>> # skipped: needs a simulated run and a rig run in runs/ (compare_runs has one that runs)
 >>> runs = [load_compared(p) for p in ("runs/sim", "runs/rig")]      # doctest: +SKIP
 >>> print(table_text(runs))                                           # doctest: +SKIP
 >>> nrmse(runs[1], runs[0], "alpha", window=1.0)                      # doctest: +SKIP
@@ -171,7 +172,33 @@ def plot_comparison(runs: list[ComparedRun], path: Path, *, window: tuple[float,
 
 
 def compare_runs(paths: list[str | Path], out_dir: Path, *, Lp: float | None = None) -> tuple[str, list[Path]]:
-    """Load, tabulate and plot; writes ``comparison.txt`` and ``comparison.png`` into ``out_dir``."""
+    """Runs side by side, aligned at the poke: the old lab's table and a plot (``pendulab compare``).
+
+    Parameters
+    ----------
+    paths : list of path
+        Run folders (``run.mat``) or folders of the old lab's logs.
+    out_dir : path
+        Where ``comparison.txt`` and ``comparison.png`` are written.
+    Lp : float, optional
+        Pendulum length for runs that do not say (old-lab logs).
+
+    Returns
+    -------
+    (str, list of Path)
+        The table's text and the files written.
+
+    Examples
+    --------
+    >>> import tempfile, pendulab
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> for delay in (0, 2):
+    ...     spec = pendulab.RunSpec(pendulab.demo_controller(), timing=pendulab.Timing(stop_time=2.0, delay=delay))
+    ...     _ = pendulab.simulate(spec).write(folder / f"delay{delay}")
+    >>> text, files = compare_runs([folder / "delay0", folder / "delay2"], folder / "comparison")
+    >>> [f.name for f in files]
+    ['comparison.txt', 'comparison.png']
+    """
     from pendulab.analysis.results import atomic_write
 
     runs = [load_compared(p, Lp=Lp) for p in paths]

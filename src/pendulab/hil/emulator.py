@@ -9,6 +9,7 @@ latency and jitter, byte errors, a restart, a stall, the port closing.
 Examples
 --------
 >>> from pendulab.hil.emulator import EmulatorOptions, RigEmulator
+>>> # skipped: opens a pseudo-terminal and runs in real time until stopped (tests/test_hil_*.py run it)
 >>> emulator = RigEmulator(EmulatorOptions(raise_after=1.0))       # doctest: +SKIP
 >>> print(emulator.open_pty())                                     # doctest: +SKIP
 /dev/pts/7

@@ -2,6 +2,7 @@
 
 Examples
 --------
+>>> # skipped: needs a rig (or 'pendulab rig-emulator') on the serial port
 >>> with RigLink.open("/dev/ttyACM0") as link:                       # doctest: +SKIP
 ...     identity = link.identify()
 ...     link.configure(delay=1)

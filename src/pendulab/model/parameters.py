@@ -172,4 +172,18 @@ class PlantParameters:
         return self.with_values(F1=0.0, F2=0.0, q_alpha=0.0, q_x=0.0, I_max=0.0, poke_magnitude=0.0)
 
 
+def _parameters_section() -> str:
+    """The numpydoc Parameters section of :class:`PlantParameters`, from its fields' metadata (one source)."""
+    lines = ["", "    Parameters", "    ----------"]
+    for name, default, unit, description in PlantParameters.describe():
+        lines += [f"    {name} : float", f"        {description} ({unit}; default {default:g})."]
+    lines += ["", "    Examples", "    --------",
+              "    >>> p = PlantParameters.preset(\"short\", cart=\"ip01\")",
+              "    >>> p.Lp, p.M_cart, p.friction",
+              "    (0.3365, 0.52, (1.5, 0.005, 3.0, 0.05, 20.0))", ""]
+    return "\n".join(lines)
+
+
+PlantParameters.__doc__ = (PlantParameters.__doc__ or "").rstrip() + "\n" + _parameters_section()
+
 FRICTION_NAMES = ("F1", "v1", "F2", "v2", "B")
