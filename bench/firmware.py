@@ -47,9 +47,8 @@ def unpaced(args: list[str], seconds: float, profile: Path) -> dict:
 def session(seconds: float, profile: Path) -> dict:
     from firmware_helpers import twin
 
-    from pendulab.hil.link import RigLink
-
     from pendulab.hil.firmware import idle_loop_range
+    from pendulab.hil.link import RigLink
 
     with twin("--kinematic", f"1.5,20,{seconds + 2}", "--idle", "%d,%d" % idle_loop_range(), profile=profile) as t, RigLink.open(t.port) as link:
         link.identify()

@@ -49,11 +49,11 @@ def main() -> int:
     args = parser.parse_args()
 
     from pendulab.calibration.fit import fit_parameters
-    from pendulab.calibration.synthetic import synthetic_ramp_log
+    from pendulab.calibration.synthetic import TEST_RIG, synthetic_ramp_log
     from pendulab.model.parameters import PlantParameters
     from pendulab.model.plant import PlantModel
 
-    true = PlantParameters.preset("none", Beq=5.2, force_gain=0.9, F1=2.0, v1=0.004, F2=3.6, v2=0.06, B=25.0)
+    true = TEST_RIG
     start = PlantParameters.preset("none")
     log = synthetic_ramp_log(true, duration=args.duration, noise=1e-5, seed=args.seed)
     print(f"log: {log.duration:.1f} s, {len(log)} samples at {1 / log.period:.0f} Hz, noise 10 um + encoder step {true.q_x * 1e6:.2f} um")

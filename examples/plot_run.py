@@ -15,9 +15,9 @@ angle and the cart position, and saves the picture as ``my_plot.png`` next to ``
 import sys
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import scipy.io
-import matplotlib.pyplot as plt
 
 if len(sys.argv) != 2:
     sys.exit("usage: python plot_run.py path/to/run.mat")

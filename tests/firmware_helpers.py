@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Iterator
 
 import numpy as np
-
 from hil_helpers import PortProcess
 
 

@@ -99,8 +99,8 @@ def angle_error_against_simulate(run: Path, poke: str, out: Path) -> tuple[int, 
     angle's NRMSE between the two over 1 s after the poke. Returns ``(N, nrmse)``."""
     import json
 
+    from pendulab.analysis.compare import load_compared, nrmse
     from pendulab.cli.main import main
-    from pendulab.hil.compare import load_compared, nrmse
 
     n = json.loads((run / "timing.json").read_text())["delay_periods"]
     assert main(["simulate", "--demo", "--delay", str(n), "--poke", poke, "--stop-time", "4", "--out", str(out)]) == 0

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from pendulab.calibration.files import load_calibration
+from pendulab.calibration.synthetic import TEST_RIG
 from pendulab.cli.main import main
 from pendulab.model.linear import linearize
 from pendulab.model.parameters import PlantParameters
 
-TRUE = (2.0, 0.004, 3.6, 0.06, 25.0)
+TRUE = TEST_RIG.friction
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:

@@ -9,10 +9,11 @@ from pendulab.calibration.extract import extract_friction, mass_ratio
 from pendulab.calibration.logs import RampLog
 from pendulab.calibration.ramp import run_ramp_test
 from pendulab.calibration.rig import VirtualRig
+from pendulab.calibration.synthetic import TEST_RIG
 from pendulab.errors import CalibrationError
 from pendulab.model.parameters import PlantParameters
 
-TRUE = (2.0, 0.004, 3.6, 0.06, 25.0)  # a non-default friction vector
+TRUE = TEST_RIG.friction  # a non-default friction vector
 
 
 @pytest.fixture(scope="module")

@@ -19,10 +19,10 @@ import scipy.io
 
 from pendulab.analysis.results import COLUMNS, read_run
 from pendulab.control.controller import demo_controller, unstable_example
-from pendulab.simulation import simulate
-from pendulab.spec import Plant, RunSpec, Timing
 from pendulab.fmu.models.supervisor.config import ALPHA_MAX_DEFAULT, RUNNING, TRIP_ANGLE, TRIPPED, X_MAX_DEFAULT
 from pendulab.model.parameters import PlantParameters
+from pendulab.simulation import simulate
+from pendulab.spec import Plant, RunSpec, Timing
 
 METRIC_KEYS = {
     "natural_frequency_rad_s",

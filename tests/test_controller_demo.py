@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import casadi as ca
 import control
 import numpy as np

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-
 import pytest
 
 from pendulab.control.controller import Controller, Factor, demo_controller
 from pendulab.control.prompt import DEFAULT_POKE, prompt_simulation
-from pendulab.spec import Poke, RunSpec
 from pendulab.errors import UserError
+from pendulab.spec import Poke, RunSpec
 
 
 class Script:

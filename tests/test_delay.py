@@ -13,10 +13,10 @@ from pendulab.control.controller import demo_controller
 from pendulab.control.realization import discretize
 from pendulab.cosim.master import Master
 from pendulab.cosim.pendulum import RECORDED, pendulum_system
-from pendulab.simulation import simulate
-from pendulab.spec import Poke, Quantization, RunSpec, Timing
 from pendulab.errors import UserError
 from pendulab.model.parameters import PlantParameters
+from pendulab.simulation import simulate
+from pendulab.spec import Poke, Quantization, RunSpec, Timing
 
 H = 1e-3
 

@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 import pytest
-
 from firmware_helpers import twin, twin_available
 
 pytestmark = [
@@ -219,9 +218,8 @@ def test_encoders_count_every_edge_at_1_5_m_per_s_and_20_rad_per_s(tmp_path):
     twin's quantized positions at every tick, and exactly at the end; the interrupts' worst case and
     the CPU load from simavr's cycle count."""
     from pendulab.hil import protocol as P
-    from pendulab.hil.link import RigLink
-
     from pendulab.hil.firmware import idle_loop_range
+    from pendulab.hil.link import RigLink
 
     idle = "%d,%d" % idle_loop_range()
     with twin("--kinematic", "1.5,20,5.3", "--idle", idle, trace=tmp_path / "trace.csv", profile=tmp_path / "profile.json") as t, \
@@ -277,7 +275,7 @@ def test_track_limit_cuts_the_motor_until_cleared_inside_and_a_fault_latches():
         link.identify()
         link.configure(delay=2, x_limit=0.1)
         link.stream(True)
-        seen, clear_next = [], False
+        seen = []
         for k in range(2900):
             sample, _ = link.next_sample(0.5)
             seen.append(sample)

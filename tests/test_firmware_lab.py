@@ -10,7 +10,6 @@ import time
 
 import numpy as np
 import pytest
-
 from firmware_helpers import twin_available
 from hil_helpers import angle_error_against_simulate, emulator, lab_process, read_log
 

@@ -7,11 +7,11 @@ import pytest
 
 from pendulab.calibration.fit import fit_parameters, plot_fit
 from pendulab.calibration.logs import RampLog
-from pendulab.calibration.synthetic import synthetic_ramp_log
+from pendulab.calibration.synthetic import TEST_RIG, synthetic_ramp_log
 from pendulab.errors import CalibrationError
 from pendulab.model.parameters import PlantParameters
 
-TRUE = PlantParameters.preset("none", Beq=5.2, force_gain=0.9, F1=2.0, v1=0.004, F2=3.6, v2=0.06, B=25.0)
+TRUE = TEST_RIG
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@ answer is not a calibration (not identifiable, or a replay far from the log), ol
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -14,12 +13,12 @@ from pendulab.calibration._simulation import simulate
 from pendulab.calibration.files import load_calibration
 from pendulab.calibration.fit import fit_parameters
 from pendulab.calibration.logs import RampLog, write_log
-from pendulab.calibration.synthetic import synthetic_ramp_log
+from pendulab.calibration.synthetic import TEST_RIG, synthetic_ramp_log
 from pendulab.cli.main import main
 from pendulab.errors import FitRejected
 from pendulab.model.parameters import PlantParameters
 
-TRUE = PlantParameters.preset("none", Beq=5.2, force_gain=0.9, F1=2.0, v1=0.004, F2=3.6, v2=0.06, B=25.0)
+TRUE = TEST_RIG
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:

@@ -10,8 +10,8 @@ import subprocess
 import sys
 import textwrap
 import zipfile
-from xml.etree import ElementTree
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest

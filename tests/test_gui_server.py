@@ -13,9 +13,9 @@ import threading
 import pytest
 
 from pendulab.cli.main import main
+from pendulab.errors import UserError
 from pendulab.gui.app import check_controller, run_spec
 from pendulab.gui.server import GuiServer
-from pendulab.errors import UserError
 
 TAB = {"X-Pendulab-Tab": "testtab-0001"}
 

@@ -9,8 +9,8 @@ import threading
 import tty
 
 import pytest
-
 from hil_helpers import ENV, PYTHON, emulator, lab
+
 from pendulab.hil import protocol as P
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")

@@ -6,7 +6,6 @@ import json
 import sys
 
 import pytest
-
 from hil_helpers import ENV, PYTHON, emulator
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")

@@ -12,7 +12,6 @@ import time
 import numpy as np
 import pytest
 import scipy.io
-
 from hil_helpers import angle_error_against_simulate, emulator, lab, lab_process, read_log
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")

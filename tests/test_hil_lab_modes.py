@@ -8,7 +8,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from hil_helpers import emulator, lab, read_log
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")

@@ -3,8 +3,8 @@ and independent FMI engines give fmpy's trajectory (issue 2, must-shows 3 and 4;
 
 from __future__ import annotations
 
-import math
 import ctypes
+import math
 import platform
 from ctypes import CFUNCTYPE, c_char_p, c_double, c_int, c_void_p
 from pathlib import Path

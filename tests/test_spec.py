@@ -149,8 +149,8 @@ def test_the_command_line_builds_the_spec_a_script_would(monkeypatch, tmp_path, 
 
 def test_lab_compare_simulates_the_spec_at_the_rigs_delay(tmp_path, loop_fmus, capsys):
     """``pendulab lab --compare``: the session's spec (the rig's delay) simulated beside the rig's run."""
+    from pendulab.analysis.compare import compare_with_simulation
     from pendulab.analysis.results import read_run
-    from pendulab.hil.compare import compare_with_simulation
     from pendulab.simulation import simulate
 
     spec = RunSpec(demo_controller(), poke=Poke(220.0, 0.005, 0.5), timing=Timing(stop_time=2.0, delay=2))
@@ -160,3 +160,14 @@ def test_lab_compare_simulates_the_spec_at_the_rigs_delay(tmp_path, loop_fmus, c
     _, meta = read_run(rig / "simulation")
     assert RunSpec.from_json(meta["run"]) == spec and int(meta["delay"]) == 2
     assert "natural frequency" in text and text in capsys.readouterr().out
+
+
+def test_the_readmes_python_example_runs(tmp_path, monkeypatch, loop_fmus, capsys):
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"## In Python.*?```python\n(.*?)```", readme, re.S).group(1)
+    monkeypatch.chdir(tmp_path)
+    exec(compile(block, "README.md", "exec"), {})
+    assert (tmp_path / "runs" / "pid" / "run.mat").is_file() and capsys.readouterr().out.strip()

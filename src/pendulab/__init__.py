@@ -57,7 +57,7 @@ _EXPORTS = {
     "load_calibration": ("pendulab.calibration.files", "load_calibration"),
     "read_log": ("pendulab.calibration.logs", "read_log"),
     # runs side by side
-    "compare": ("pendulab.hil.compare", "compare_runs"),
+    "compare": ("pendulab.analysis.compare", "compare_runs"),
     # blocks of your own
     "Block": ("pendulab.blocks.base", "Block"),
     "Var": ("pendulab.blocks.base", "Var"),

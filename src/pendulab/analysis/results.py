@@ -39,7 +39,8 @@ import scipy.io
 
 import pendulab
 from pendulab.errors import UserError
-from pendulab.outputs import atomic_write, create_temporary, write_temporary as _write_temporary  # noqa: F401 - re-exported
+from pendulab.outputs import atomic_write, create_temporary  # noqa: F401 - re-exported
+from pendulab.outputs import write_temporary as _write_temporary
 
 #: The columns of every run file, in this order (SPEC §7).
 COLUMNS = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state")

@@ -25,7 +25,6 @@ import scipy.sparse as sp
 from pendulab.native import shared_library
 
 
-
 def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1", flags: Sequence[str] = ()) -> tuple[str | None, bool]:
     """Shared library holding ``functions`` (built once, cached by :func:`pendulab.native.shared_library`)
     and whether it was built just now; ``(None, False)`` without a working compiler."""

@@ -17,6 +17,9 @@ from pendulab.calibration.ramp import run_ramp_test
 from pendulab.calibration.rig import VirtualRig
 from pendulab.model.parameters import PlantParameters
 
+#: A plausible rig unlike the lab's defaults (the cart alone): what tests and benchmarks extract or fit back.
+TEST_RIG = PlantParameters.preset("none", Beq=5.2, force_gain=0.9, F1=2.0, v1=0.004, F2=3.6, v2=0.06, B=25.0)
+
 
 def synthetic_ramp_log(
     params: PlantParameters,

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from pendulab.cli.options import add_overwrite_option
 from pendulab.errors import CalibrationError
-from pendulab.outputs import check_output_file
 from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
+from pendulab.outputs import check_output_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -104,8 +104,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.port:
         from pendulab.hil.link import RigLink
-        from pendulab.hil.rig import HilRig
         from pendulab.hil.protocol import DEFAULT_MAX_DELAY
+        from pendulab.hil.rig import HilRig
         from pendulab.hil.session import choose_delay
 
         link = RigLink.open(args.port, args.baud)

@@ -31,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pendulab.hil.compare import compare_runs
+    from pendulab.analysis.compare import compare_runs
     from pendulab.model.parameters import PlantParameters
 
     if args.out.exists() and not args.out.is_dir():

@@ -7,8 +7,8 @@ import datetime as _dt
 
 from pendulab.cli.options import add_overwrite_option
 from pendulab.errors import CalibrationError, FitRejected
-from pendulab.outputs import check_output_file
 from pendulab.model.parameters import CARTS, FRICTION_NAMES, PlantParameters
+from pendulab.outputs import check_output_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

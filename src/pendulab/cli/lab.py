@@ -14,7 +14,6 @@ from pendulab.hil.protocol import DEFAULT_MAX_DELAY
 from pendulab.outputs import run_folder
 
 
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "lab",
@@ -129,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         columns, _ = read_run(out_dir)
         plot_run(columns, out_dir, title=f"rig, {args.pendulum} pendulum", poke_start=metrics.get("poke_start_detected_s") or 0.0)
     if args.compare:
-        from pendulab.hil.compare import compare_with_simulation
+        from pendulab.analysis.compare import compare_with_simulation
 
         compare_with_simulation(out_dir, spec, metrics=metrics)
     lat = timing["answer_latency_ms"]

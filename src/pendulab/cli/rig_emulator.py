@@ -102,7 +102,6 @@ def run(args: argparse.Namespace) -> int:
     if sys.platform == "win32" and args.tcp is None:
         raise UserError("pseudo-terminals do not exist on Windows: use --tcp PORT and 'pendulab lab --port socket://127.0.0.1:PORT'")
     from pendulab.hil.emulator import RigEmulator
-
     from pendulab.hil.realtime import raise_priority
 
     emulator = RigEmulator(options)

@@ -11,11 +11,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pendulab.cli.options import (
-    add_controller_options, add_mode_options, add_overwrite_option, add_plant_options, controller_from_args, plant_from_args,
+    add_controller_options,
+    add_mode_options,
+    add_overwrite_option,
+    add_plant_options,
+    controller_from_args,
+    plant_from_args,
 )
 from pendulab.errors import UserError
 from pendulab.outputs import run_folder
-from pendulab.spec import MAX_STEPS, POKE_DEFAULT  # noqa: F401  (POKE_DEFAULT: used by lab)
 
 if TYPE_CHECKING:
     from pendulab.spec import RunSpec

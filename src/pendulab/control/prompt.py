@@ -24,12 +24,12 @@ from typing import Callable, TypeVar
 
 from pendulab.control.controller import MAX_FACTORS, Controller, Factor, Number, parse_numbers, to_number
 from pendulab.errors import ControllerError, UserError
-from pendulab.spec import POKE_DEFAULT, Poke, RunSpec
+from pendulab.spec import Poke, RunSpec
 
 T = TypeVar("T")
 
-#: Poke defaults (SPEC §2): magnitude rad/s², duration s, start s.
-DEFAULT_POKE = POKE_DEFAULT
+#: Poke defaults (SPEC §2): magnitude rad/s², duration s, start s (the spec's).
+DEFAULT_POKE = (Poke().magnitude, Poke().duration, Poke().start)
 PENDULUMS = ("long", "short")
 
 INTRO = (

@@ -85,8 +85,9 @@ class Master:
             if {n: c.fmu for n, c in system.components.items()} != mine:
                 raise ValueError("reset(system): the system must have the same components and FMUs as the master's")
             self.system = system
-        for instance in self.instances.values():
+        for name, instance in self.instances.items():
             instance.fmu.reset()
+            instance.start_values = dict(self.system.components[name].start_values)
 
     def initialize(self, start_time: float, stop_time: float | None = None) -> None:
         """Set every component's start values and initialize it (``run`` does this itself)."""

@@ -18,7 +18,6 @@ import importlib
 import os
 import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 import zipfile
@@ -30,7 +29,7 @@ import fmpy
 from pendulab.errors import FmuBuildError
 from pendulab.fmu.description import ModelSpec, model_description_xml, variables_header
 from pendulab.fmu.models import ALL_FMUS, FMI3_MODELS, MODELS
-from pendulab.native import PREBUILT_DIR, WIN64_COMPILER, compile_shared, cache_dir, compiler_needed, find_compiler, library_suffix
+from pendulab.native import PREBUILT_DIR, WIN64_COMPILER, cache_dir, compile_shared, compiler_needed, find_compiler, library_suffix
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 WRAPPER_DIR = Path(__file__).resolve().parent / "c"

@@ -189,7 +189,7 @@ def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
     """Columns (thinned to :data:`MAX_POINTS`), poke start, metrics and files of a run folder or old-lab folder."""
     import numpy as np
 
-    from pendulab.hil.compare import load_compared
+    from pendulab.analysis.compare import load_compared
 
     run = load_compared(folder)
     n = run.columns["t"].size

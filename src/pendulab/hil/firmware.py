@@ -20,7 +20,6 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 from pendulab.errors import UserError

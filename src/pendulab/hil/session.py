@@ -385,36 +385,6 @@ def rig_columns(log_path: Path, Lp: float) -> dict[str, np.ndarray]:
     }
 
 
-def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: float | None = None,
-                before: float | None = None) -> float | None:
-    """Onset of the poke in a measured angle: where the angular velocity jumps.
-
-    A poke is a short pulse of angular acceleration, so the angle's speed (a central difference over
-    10 ms, which averages the encoder steps away) jumps within a few milliseconds to the largest value
-    of the run before any cut. The onset is the first sample where the speed reaches half that value
-    (at most a few ms after the true start for a pulse of 5 ms). None when nothing moves by more than
-    the quantization.
-    """
-    t = np.asarray(t, dtype=float)
-    alpha = np.asarray(alpha, dtype=float)
-    mask = np.ones_like(t, dtype=bool)
-    if after is not None:
-        mask &= t >= after
-    if before is not None:
-        mask &= t < before
-    idx = np.flatnonzero(mask)
-    if idx.size < 30:
-        return None
-    ts, seg = t[idx], alpha[idx]
-    h = float(np.median(np.diff(ts)))
-    w = max(1, int(round(0.005 / h)))
-    speed = np.abs(seg[2 * w:] - seg[: -2 * w]) / (ts[2 * w:] - ts[: -2 * w])
-    if speed.size == 0 or speed.max() < 2 * max(q_alpha, 1e-9) / (2 * w * h):
-        return None
-    first = int(np.argmax(speed >= 0.5 * speed.max()))
-    return float(ts[first + w])
-
-
 def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: dict[str, Any], round_trips: list[float]) -> tuple[dict, dict]:
     """run.mat, run.csv, metrics.json and timing.json from the streamed log."""
     from pendulab.analysis.metrics import compute_metrics
@@ -428,6 +398,8 @@ def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: d
     if tripped.size:
         cut = float(t[tripped[0]])
     # The poke is looked for while the controller holds the pendulum (after the capture, before a cut).
+    from pendulab.analysis.compare import detect_poke
+
     poke = detect_poke(t, columns["alpha"], q_alpha=q_alpha, after=float(t[running[0]]) + 0.1, before=cut) if running.size else None
     metrics: dict[str, Any]
     if poke is not None and t.size > 10 and poke < t[-1] - 0.05:

@@ -21,6 +21,7 @@ Examples
 ... samples = 4
 ... F1 = { uniform = [1.0, 2.0] }
 ... ''')
+>>> # skipped: starts worker processes and writes sweep-out/ (tests/test_sweep.py runs sweeps)
 >>> result = ps.sweep(spec, "sweep-out", workers=2)         # doctest: +SKIP
 >>> result.counts                                            # doctest: +SKIP
 {'balanced': 0, 'cut': 8, 'fell': 0, 'error': 0, 'timeout': 0}

@@ -144,6 +144,7 @@ def robustness(
     --------
     >>> import pendulab
     >>> from pendulab.control import demo_controller
+    >>> # skipped: 200 runs of 5 s (tests/test_sweep.py runs a small one)
     >>> answer = robustness(pendulab.RunSpec(demo_controller()), 200, "runs/robust")   # doctest: +SKIP
     >>> answer.line()                                                                   # doctest: +SKIP
     'balances on 100 % (95 % CI 98–100 %) of 200 plausible rigs'

@@ -15,6 +15,7 @@ Examples
 --------
 >>> from pendulab.sweep.spec import parse_sweep_spec, runs_of
 >>> spec = parse_sweep_spec("[run]\\nstop_time = 2\\n[controller]\\ndemo = true")
+>>> # skipped: the sweep's own tests (tests/test_sweep.py) run batches
 >>> with BatchRunner() as runner:                                   # doctest: +SKIP
 ...     row = runner.run(spec, *next(runs_of(spec)))
 >>> row["status"]                                                   # doctest: +SKIP

@@ -48,7 +48,7 @@ def spec() -> ModelSpec:
                  description="Wrap alpha_measured into (-pi, pi] (a pendulum that may turn over, as in a swing-up)"),
     ]
     variables.append(Variable("integral_index", "Integer", "parameter", start=0,
-                              description=f"1-based index of the state held within +/-integral_limit (0: none)", initial="exact"))
+                              description="1-based index of the state held within +/-integral_limit (0: none)", initial="exact"))
     return ModelSpec(
         identifier="Controller",
         description="Student controller: discrete linear time-invariant block x+ = A x + B e, V = C x + D e, e = r - Lp*alpha",

@@ -1,4 +1,7 @@
-"""Rig against simulation: runs aligned at the poke, the old lab's table side by side, an overlay plot.
+"""Runs side by side (rig against simulation): aligned at the poke, the old lab's table, an overlay plot.
+
+The poke's onset in a measured angle (:func:`detect_poke`) is found here too: the lab's results and
+the comparison of runs that do not say when their poke came both use it.
 
 Examples
 --------
@@ -54,7 +57,6 @@ def _is_old_lab_folder(path: Path) -> bool:
 def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float = 2 * np.pi / 4096) -> ComparedRun:
     """A run folder (``pendulab simulate``/``lab``), a run file, or a folder of the old lab's logs."""
     from pendulab.analysis.metrics import compute_metrics
-    from pendulab.hil.session import detect_poke
 
     path = Path(path)
     if not path.exists():
@@ -113,6 +115,36 @@ def nrmse(run: ComparedRun, reference: ComparedRun, name: str = "alpha", *, wind
     if span == 0:
         raise UserError(f"{reference.label} does not move after its poke; nothing to compare")
     return float(np.sqrt(np.mean((y - y_ref[keep]) ** 2)) / span)
+
+
+def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: float | None = None,
+                before: float | None = None) -> float | None:
+    """Onset of the poke in a measured angle: where the angular velocity jumps.
+
+    A poke is a short pulse of angular acceleration, so the angle's speed (a central difference over
+    10 ms, which averages the encoder steps away) jumps within a few milliseconds to the largest value
+    of the run before any cut. The onset is the first sample where the speed reaches half that value
+    (at most a few ms after the true start for a pulse of 5 ms). None when nothing moves by more than
+    the quantization.
+    """
+    t = np.asarray(t, dtype=float)
+    alpha = np.asarray(alpha, dtype=float)
+    mask = np.ones_like(t, dtype=bool)
+    if after is not None:
+        mask &= t >= after
+    if before is not None:
+        mask &= t < before
+    idx = np.flatnonzero(mask)
+    if idx.size < 30:
+        return None
+    ts, seg = t[idx], alpha[idx]
+    h = float(np.median(np.diff(ts)))
+    w = max(1, int(round(0.005 / h)))
+    speed = np.abs(seg[2 * w:] - seg[: -2 * w]) / (ts[2 * w:] - ts[: -2 * w])
+    if speed.size == 0 or speed.max() < 2 * max(q_alpha, 1e-9) / (2 * w * h):
+        return None
+    first = int(np.argmax(speed >= 0.5 * speed.max()))
+    return float(ts[first + w])
 
 
 def _fmt(value: Any, unit: str) -> str:
