@@ -115,6 +115,8 @@ def _metrics_figure(table: Any) -> Any:
             ax.hist(values, bins=min(30, max(5, values.size // 4)), color="tab:blue")
         else:
             ax.text(0.5, 0.5, "no balanced run\nhas this metric", ha="center", va="center", transform=ax.transAxes)
+            ax.set_xticks([])
+            ax.set_yticks([])
         ax.set_title(name, fontsize=9)
     cells[-1].axis("off")
     fig.suptitle("metrics of the balanced runs")
