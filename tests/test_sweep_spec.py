@@ -106,3 +106,13 @@ def test_a_bad_spec_is_one_line_naming_the_key_exit_2_and_no_folder(case, tmp_pa
     assert not out.exists()
     with pytest.raises(SpecError):
         parse_sweep_spec(text)
+
+
+@pytest.mark.parametrize("options, key", [(["--workers", "0"], "--workers"), (["--scheduler", "bogus"], "--scheduler"),
+                                          (["--scheduler", "local:x"], "local:N"), (["--resume"], "--resume")])
+def test_bad_engine_options_are_one_line_before_anything_else(options, key, tmp_path, capsys):
+    (tmp_path / "spec.toml").write_text("[run]\nstop_time = 2\n[controller.pid]\nkp = [600, 750]\nki = 6\nkd = 5\n")
+    out = tmp_path / "out"
+    assert main(["sweep", str(tmp_path / "spec.toml"), "--out", str(out), *options]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and key in err and not out.exists()

@@ -81,11 +81,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("give --resume (continue the sweep in --out) or --overwrite (start it again), not both")
     ResultStore.check(args.out, spec, args.resume, args.overwrite)
     bar = ProgressBar()
-    print(f"sweep: {spec.n_points} controller point{'s' if spec.n_points != 1 else ''} x {spec.n_samples} plant "
-          f"sample{'s' if spec.n_samples != 1 else ''} = {spec.n_runs} runs of {spec.run['stop_time']:g} s", file=sys.stderr)
     try:
         result = sweep(args.spec, args.out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
-                       overwrite=args.overwrite, plots=not args.no_plots, progress=bar)
+                       overwrite=args.overwrite, plots=not args.no_plots, progress=bar,
+                       announce=lambda line: print(line, file=sys.stderr, flush=True))
     except KeyboardInterrupt:
         bar.end()
         raise UserError(f"sweep interrupted; the runs done so far are saved in {args.out}: continue with --resume") from None

@@ -101,6 +101,7 @@ def sweep(
     overwrite: bool = False,
     plots: bool = True,
     progress: Callable[[Progress], None] | None = None,
+    announce: Callable[[str], None] | None = None,
 ) -> SweepResult:
     """Run a sweep into the folder ``out``; ``DIR/results.parquet`` holds one row per run.
 
@@ -119,6 +120,8 @@ def sweep(
         Replace an earlier sweep or run in ``out`` (refused without it).
     progress : callable, optional
         Called with a :class:`Progress` after each batch.
+    announce : callable, optional
+        Called with one line saying what will run where, once every check has passed and the engine is up.
     """
     from pendulab.sweep.engines import make_engine
     from pendulab.sweep.store import ResultStore
@@ -131,6 +134,9 @@ def sweep(
     ResultStore.check(out, spec, resume, overwrite)  # before any work, and before the folder exists
     started = time.perf_counter()
     with make_engine(scheduler, workers) as engine:
+        if announce is not None:
+            announce(f"sweep: {spec.n_points} controller point{'s' if spec.n_points != 1 else ''} x {spec.n_samples} plant "
+                     f"sample{'s' if spec.n_samples != 1 else ''} = {spec.n_runs} runs of {spec.run['stop_time']:g} s on {engine.describe()}")
         store = ResultStore.open(out, spec, text or f"# {spec.source}\n", resume, overwrite)
         todo = [i for i in range(spec.n_runs) if i not in store.done]
         count = getattr(engine, "workers", None) or max(1, len(engine.client.scheduler_info().get("workers", {})))
