@@ -50,7 +50,7 @@ def test_lab_swings_up_catches_and_holds_the_pendulum(tmp_path):
     t, state = log["t"], log["supervisor_state"]
     catch = metrics["catch_time_s"]
     print(f"lab against the emulator: caught at {catch} s, largest |x| {metrics['max_abs_x_m']:.3f} m")
-    assert state[0] == SWINGING and catch is not None and catch < 15.0 - 8.0  # measured 5.5 s: 17 s holds 10 s after it
+    assert state[0] == SWINGING and catch is not None and catch < 15.0 - 8.0  # measured 5.5 s: a 17 s session holds 10 s after it
     assert metrics["max_abs_x_m"] <= 0.35
     held = t >= catch
     assert np.all(state[held] == RUNNING) and t[-1] - catch >= 10.0
