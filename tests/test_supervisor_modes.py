@@ -153,3 +153,22 @@ def test_the_swing_time_limit_stops_the_swing_with_the_reason(loop_fmus):
     k = int(np.argmax(log["supervisor.state"] == TRIPPED))
     assert log["supervisor.trip_reason"][-1] == TRIP_SWING_TIME and log["supervisor.trip_time"][-1] == pytest.approx(2.001, abs=1e-3)
     assert _motor_off_from(log, k)
+
+
+def test_simulate_cli_prints_and_records_the_mode_events(capsys, tmp_path):
+    import json
+
+    import scipy.io
+
+    from pendulab.cli.main import main
+
+    out = tmp_path / "run"
+    assert main(["simulate", "--demo", "--start", "hanging", "--swing-up", "--recentre", "--stop-time", "8", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "swing-up            started 0 s, caught" in printed and "swinging up -> running (caught)" in printed
+    assert "re-centring engaged" in printed
+    metrics = json.loads((out / "metrics.json").read_text())
+    run = scipy.io.loadmat(out / "run.mat", squeeze_me=True, struct_as_record=False)
+    assert 0 < metrics["catch_time_s"] < 8 and run["reference"].size == run["t"].size
+    assert list(run["meta"].mode_events) and run["meta"].start == "hanging"
+    assert json.loads(run["meta"].run)["supervisor"]["swing_up"] is True
