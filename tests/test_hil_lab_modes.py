@@ -14,7 +14,7 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminal
 
 SWINGING, RUNNING = 6, 2
 #: lab's own verdicts on a host too slow for the link (a swamped machine), not on the rig or the modes.
-HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time")
+HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time", "while setting up the session")
 
 
 def _lab_once_more_if_the_host_was_too_slow(out, emulator_args, lab_args):
