@@ -145,3 +145,60 @@ def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_f
     fmi2 = _fmi2_open_loop(plant_fmu, tmp_path / "fmi2", steps)
     print("FMI 2.0 plant, same case:", fmi2, "max |difference|", np.max(np.abs(fmi2 - linux[0])))
     np.testing.assert_allclose(linux[0], fmi2, rtol=0, atol=1e-12)
+
+
+PLAN_HOST = Path(__file__).parent / "hosts" / "plan_host.c"
+
+
+def _plan_reference() -> list[np.ndarray]:
+    """What tests/hosts/plan_host.c must print, computed here: the plan's semantics in Python."""
+    state, steps, rows = 1.0, 0, []
+    for k in range(10):
+        rows += [state + 0, state + 1]
+        state += 0.25 * rows[-1]
+        if k == 9:
+            break  # the barrier: no step after the last point
+        steps += 1
+        state = 0.5 * state + 0.1 * k + 0.1
+    first = np.array([-1, steps, *rows])
+    state = 1.0
+    for k in range(10):
+        state += 0.25 * (state + 1)
+        if 0.1 * k >= 0.5:
+            return [first, np.array([4, k, state])]  # op 4 (the step) failed at point k
+        state = 0.5 * state + 0.1 * k + 0.1
+    raise AssertionError("unreachable")
+
+
+def plan_runner_binary(folder: Path, windows: bool) -> Path:
+    """The plan runner as a wheel ships it: from the built wheel in $PENDULAB_WHEEL_DIR, else compiled the same way."""
+    from pendulab.cosim.master import PLAN_RUNNER_FLAGS, PLAN_RUNNER_SOURCE
+    from pendulab.native import compile_shared, library_name
+
+    name = library_name(PLAN_RUNNER_SOURCE.read_bytes(), PLAN_RUNNER_SOURCE.stem, PLAN_RUNNER_FLAGS,
+                        system="Windows" if windows else "Linux")
+    wheels = sorted(Path(os.environ.get("PENDULAB_WHEEL_DIR", "/nonexistent")).glob(f"*{'win_amd64' if windows else 'manylinux'}*.whl"))
+    target = folder / name
+    if wheels:
+        target.write_bytes(zipfile.ZipFile(wheels[-1]).read(f"pendulab/prebuilt/{name}"))
+    else:
+        compile_shared(WIN64_COMPILER if windows else "cc", [PLAN_RUNNER_SOURCE], target, flags=PLAN_RUNNER_FLAGS, windows=windows)
+    return target
+
+
+@pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
+def test_plan_runner_dll_runs_under_wine_like_linux64(tmp_path):
+    """The win64 step-plan runner a wheel carries: loads in a C host under Wine, runs a plan (reads, a connection,
+    writes, the barrier, steps) and stops at a failing step exactly as the linux64 one does; imports only
+    KERNEL32 and msvcrt."""
+    results = {}
+    for platform_dir in ("linux64", "win64"):
+        folder = tmp_path / platform_dir
+        folder.mkdir()
+        library = plan_runner_binary(folder, platform_dir == "win64")
+        results[platform_dir] = _run_host(PLAN_HOST, platform_dir == "win64", folder, [str(library)])
+    dump = subprocess.run(["x86_64-w64-mingw32-objdump", "-p", str(library)], capture_output=True, text=True, check=True).stdout
+    assert {line.split(":")[1].strip().lower() for line in dump.splitlines() if "DLL Name:" in line} == {"kernel32.dll", "msvcrt.dll"}
+    for linux, windows, reference in zip(results["linux64"], results["win64"], _plan_reference()):
+        np.testing.assert_array_equal(linux, reference)
+        np.testing.assert_array_equal(windows, reference)

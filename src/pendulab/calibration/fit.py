@@ -477,6 +477,7 @@ def fit_parameters(
     >>> result = fit_parameters([read_log("ramp.csv")])       # doctest: +SKIP
     """
     from pendulab.calibration import _polish, _replay
+    from pendulab.native import VM_FALLBACK_NOTE, install_hint
     from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
 
     t_start = time.perf_counter()
@@ -573,7 +574,7 @@ def fit_parameters(
         progress(
             f"fitting {', '.join(names)} to {len(logs)} log(s): {n_samples} samples, {n_intervals} shooting intervals"
             + (f" (the friction law's switches {width_scale:g} times wider)" if width_scale != 1 else "")
-            + ("" if compiled else " (no C compiler: evaluating in CasADi's virtual machine, slower)")
+            + ("" if compiled else f" ({VM_FALLBACK_NOTE}; to compile it, {install_hint()})")
         )
         solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
         solution_of = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])

@@ -18,7 +18,7 @@ from pendulab import __version__
 from pendulab.errors import UserError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-SUBCOMMANDS = ("simulate", "tf", "lqr", "build_fmus", "calibrate", "fit", "lab", "rig_emulator", "compare", "gui", "sweep")
+SUBCOMMANDS = ("simulate", "tf", "lqr", "build_fmus", "calibrate", "fit", "lab", "rig_emulator", "compare", "gui", "sweep", "docs")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Subcommands that load FMUs, and so take ``--fmus DIR``.
-FMU_COMMANDS = frozenset({"simulate", "calibrate", "lab", "rig-emulator", "compare", "gui", "sweep"})
+FMU_COMMANDS = frozenset({"simulate", "calibrate", "lab", "rig-emulator", "gui", "sweep"})
 
 
 def _use_fmu_dir(folder: str | None) -> None:

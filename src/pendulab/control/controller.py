@@ -102,7 +102,7 @@ def _parse_token(token: str, what: str) -> Number:
     return _finite(value, what, original.strip())
 
 
-#: Largest magnitude of any number (far beyond any controller; keeps |z| and products finite).
+#: Largest magnitude of any number (far beyond any controller; keeps ``|z|`` and products finite).
 MAX_MAGNITUDE = 1e100
 
 
@@ -754,12 +754,12 @@ def demo_controller(pendulum: str = "long") -> Controller:
     ``(s+80)^2`` rolls off the encoder noise. Designed for both lengths at once on the sampled linear
     loop (1 ms, Tustin, one sample of computation delay, :mod:`pendulab.control.loop`):
 
-    ========  ============================  ==============  ================
-    pendulum  slowest closed-loop pole      least damping   stable loop gain
-    ========  ============================  ==============  ================
-    long      s = -2.39 (z = 0.99761)       0.58            0.56x .. 4.2x
-    short     s = -2.97±4.88j (z = 0.99704) 0.52            0.70x .. 4.3x
-    ========  ============================  ==============  ================
+    ========  =============================  =============  ================
+    pendulum  slowest closed-loop pole       least damping  stable loop gain
+    ========  =============================  =============  ================
+    long      s = -2.39 (z = 0.99761)        0.58           0.56x .. 4.2x
+    short     s = -2.97±4.88j (z = 0.99704)  0.52           0.70x .. 4.3x
+    ========  =============================  =============  ================
 
     A 50 rad/s² 5 ms poke gives a swing of 1.1° (long) / 1.3° (short) with at most 2 V, settling in
     about 1.7 s (long) / 1.3 s (short) in the linear model; the cart drifts by 8 cm (long) / 2 cm

@@ -29,6 +29,22 @@ class RigRestarted(Exception):
     """The rig reset during a session (new boot id or its tick went back)."""
 
 
+def available_ports() -> str:
+    """``"; serial ports here: COM3 (USB Serial Device), ..."`` for an error message, or ``""`` if none.
+
+    On a Windows lab PC the rig's COM number changes with the USB socket it is plugged into, so a TA
+    who gave the wrong one sees the right one in the same line.
+    """
+    try:
+        from serial.tools.list_ports import comports
+
+        ports = sorted(comports(), key=lambda p: (len(p.device), p.device))  # COM3 before COM10
+    except Exception:  # noqa: BLE001 - listing is a courtesy; the error itself is what matters
+        return ""
+    names = [f"{p.device} ({p.description})" if p.description and p.description != "n/a" else p.device for p in ports]
+    return f"; serial ports here: {', '.join(names)}" if names else "; no serial port found here (is the rig plugged in?)"
+
+
 class RigLink:
     """A rig on a pyserial port (a device, ``socket://HOST:PORT``, ``loop://``).
 
@@ -63,7 +79,7 @@ class RigLink:
             text = str(exc).split("\n")[0]
             raise UserError(
                 f"cannot open port {port!r}: {text}; give the rig's port (COM3 on Windows, /dev/ttyACM0 or /dev/ttyUSB0 on "
-                f"Linux, socket://HOST:PORT for a rig on another machine)"
+                f"Linux, socket://HOST:PORT for a rig on another machine){available_ports()}"
             ) from None
         return cls(handle, port)
 

@@ -66,11 +66,11 @@ def mean_poke_acceleration(p: dict[str, ca.SX], t: ca.SX, h: ca.SX) -> ca.SX:
 
 #: Discrete state of the Model Exchange plant (each changes only at events), in order.
 REGIME = ("friction", "current", "stop", "count_alpha", "count_x")
-#: Friction regimes (``REGIME[0]``). The two sliding regimes hold the speed on the surface |xdot| = v1
-#: (between stick and slip) or |xdot| = v2 (between slip and free) where both sides push the cart onto
+#: Friction regimes (``REGIME[0]``). The two sliding regimes hold the speed on the surface ``|xdot| = v1``
+#: (between stick and slip) or ``|xdot| = v2`` (between slip and free) where both sides push the cart onto
 #: it: the Filippov solution that Co-Simulation's fixed step approximates by chattering.
 FREE, SLIP, STICK, SLIDE_V1, SLIDE_V2 = 0.0, 1.0, 2.0, 3.0, 4.0
-#: How close |xdot| must be to v1 or v2 for an event to count as on that surface (m/s).
+#: How close ``|xdot|`` must be to v1 or v2 for an event to count as on that surface (m/s).
 SURFACE_TOLERANCE = 1e-9
 #: The event indicators (zero crossings) of the Model Exchange plant, in order.
 EVENT_INDICATORS = (
