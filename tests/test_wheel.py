@@ -29,7 +29,6 @@ import zipfile
 from pathlib import Path
 
 import pytest
-
 from hil_helpers import PortProcess
 
 REPO = Path(__file__).resolve().parents[1]

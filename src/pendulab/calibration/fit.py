@@ -477,8 +477,8 @@ def fit_parameters(
     >>> result = fit_parameters([read_log("ramp.csv")])       # doctest: +SKIP
     """
     from pendulab.calibration import _polish, _replay
-    from pendulab.native import VM_FALLBACK_NOTE, install_hint
     from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
+    from pendulab.native import VM_FALLBACK_NOTE, install_hint
 
     t_start = time.perf_counter()
     progress = on_progress or (lambda text: None)
