@@ -33,7 +33,7 @@ def _runs(flag: np.ndarray, t: np.ndarray) -> list[list[float]]:
 
 
 def mode_metrics(t: Any, state: Any, *, recentring: Any = None, x: Any = None) -> dict[str, Any]:
-    """The modes' moments: swing start, catches, missed catches, re-centring intervals, largest |x|.
+    """The modes' moments: swing start, catches, missed catches, re-centring intervals, largest ``|x|``.
 
     Parameters
     ----------
