@@ -116,7 +116,7 @@ def test_fit_bad_options(capsys, calibrated, tmp_path):
     _, log = calibrated
     for argv, words in [
         (["--fit", "F1,Mp"], "cannot fit 'Mp'"),
-        (["--plot", str(tmp_path / "fit.jpg")], "must end in .png"),
+        (["--plot", str(tmp_path / "fit.jpg")], "must be a .png file"),
         (["--out", str(tmp_path)], "is a directory"),
         (["--calibration", str(tmp_path / "missing.json")], "does not exist"),
     ]:

@@ -154,6 +154,6 @@ def test_lab_picks_a_longer_delay_behind_a_usb_bridge(tmp_path):
     with emulator("--latency", "1", "--jitter", "0.3") as emu, RigLink.open(emu.port) as link:
         link.identify()
         said: list[str] = []
-        n = choose_delay(link, 4, samples=500, announce=said.append)
+        n = choose_delay(link, 8, samples=500, announce=said.append)
     assert n >= 2, said  # (2 or 3 on a quiet machine; a loaded one may need more)
     assert "N = 1 is too short" in said[0]

@@ -74,7 +74,7 @@ def test_output_file_under_a_file_and_wrong_suffix(tmp_path):
     (tmp_path / "f").write_text("")
     with pytest.raises(UserError, match="is a file, not a folder"):
         check_output_file(tmp_path / "f" / "sub" / "c.json")
-    with pytest.raises(UserError, match=r"must end in \.png"):
+    with pytest.raises(UserError, match=r"must be a \.png file"):
         check_output_file(tmp_path / "plot.jpg", "--plot", suffixes=(".png",))
     assert not (tmp_path / "f.json").exists()
 

@@ -149,9 +149,13 @@ typedef struct {
     double u0, u1;      /* position in counts at seg_start / seg_end */
     avr_irq_t *a, *b;
     avr_cycle_count_t last_edge[2];
+    int fault;          /* 0, or ENC_DEAD / ENC_FROZEN from fault_at on */
+    double fault_at;    /* s after the host connects; < 0: never */
 } Encoder;
 
-static Encoder enc[2] = {{"cart", 0, 0, 0, 0, 0, 0, {0, 0}}, {"pendulum", 2, 0, 0, 0, 0, 0, {0, 0}}};
+enum { ENC_DEAD = 1, ENC_FROZEN = 2 };
+static Encoder enc[2] = {{"cart", 0, 0, 0, 0, 0, 0, {0, 0}, 0, -1}, {"pendulum", 2, 0, 0, 0, 0, 0, {0, 0}, 0, -1}};
+static int enc_fault_kind[2];   /* the fault given on the command line, applied at fault_at */
 static long edges_total;
 
 static void drive_pins(Encoder *e) {
@@ -196,6 +200,7 @@ static void plan_encoders(void) {
         enc[i].u0 = u[i][0];
         enc[i].u1 = u[i][1];
         avr_cycle_timer_cancel(avr, edge_timer, &enc[i]);
+        if (enc[i].fault) continue; /* a dead or frozen encoder makes no more edges */
         avr_cycle_count_t at = edge_due(&enc[i]);
         if (at) avr_cycle_timer_register(avr, at - avr->cycle, edge_timer, &enc[i]);
     }
@@ -490,6 +495,18 @@ static void person(double t) {
         avr_raise_irq(fault_pin, 0);
         say("amplifier fault input active");
     }
+    for (int i = 0; i < 2; i++) {
+        if (since >= 0 && enc[i].fault_at >= 0 && since >= enc[i].fault_at && !enc[i].fault) {
+            enc[i].fault = enc_fault_kind[i];
+            avr_cycle_timer_cancel(avr, edge_timer, &enc[i]);
+            if (enc[i].fault == ENC_DEAD) {
+                /* Power or cable lost: both channels fall low (the decoder sees at most one more edge). */
+                avr_raise_irq(enc[i].a, 0);
+                avr_raise_irq(enc[i].b, 0);
+            }
+            say("%s encoder %s: no more edges", enc[i].name, enc[i].fault == ENC_DEAD ? "dead (both channels low)" : "frozen");
+        }
+    }
     if (since >= 0 && close_after >= 0 && since >= close_after) {
         say("closing the port (--close-after)");
         exit(0);
@@ -637,6 +654,13 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--restart-after")) { NEEDV(); restart_after = atof(v); }
         else if (!strcmp(a, "--fault-after")) { NEEDV(); fault_after = atof(v); }
         else if (!strcmp(a, "--close-after")) { NEEDV(); close_after = atof(v); }
+        else if (!strcmp(a, "--dead-encoder") || !strcmp(a, "--frozen-encoder")) {
+            NEEDV();
+            int which = !strncmp(v, "cart,", 5) ? 0 : !strncmp(v, "pendulum,", 9) ? 1 : -1;
+            if (which < 0) usage("--dead-encoder / --frozen-encoder WHICH,S (cart or pendulum)");
+            enc[which].fault_at = atof(strchr(v, ',') + 1);
+            enc_fault_kind[which] = !strcmp(a, "--dead-encoder") ? ENC_DEAD : ENC_FROZEN;
+        }
         else if (!strcmp(a, "--byte-error-rate")) { NEEDV(); byte_error_rate = atof(v); }
         else if (!strcmp(a, "--duration")) { NEEDV(); duration = atof(v); }
         else if (!strcmp(a, "--hang-after")) { NEEDV(); hang_after = atof(v); }

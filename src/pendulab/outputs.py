@@ -130,11 +130,20 @@ def check_output_file(
     if target.is_dir():
         raise UserError(f"{option} {target} is a directory; give a file name such as {target / ('output' + (suffixes[0] if suffixes else ''))}")
     if suffixes and target.suffix.lower() not in suffixes:
-        raise UserError(f"{option} {target} must end in {' or '.join(suffixes)}")
+        raise UserError(f"{option} {target} must be a {' or '.join(suffixes)} file")
     if (target.exists() or target.is_symlink()) and not overwrite:
         raise UserError(f"{option} {target} exists (an earlier result); give another name, or add --overwrite to replace it")
     _check_creatable(target.parent, option, target)
     return target
+
+
+def check_folder(path: str | os.PathLike[str], option: str = "--out") -> Path:
+    """Check a folder of build products or caches (replaced freely): not a file, writable or creatable."""
+    folder = Path(path)
+    if folder.exists() and not folder.is_dir():
+        raise UserError(f"{option} {folder} is a file; give a folder name")
+    _check_creatable(folder, option, folder)
+    return folder
 
 
 def earlier_run_files(folder: str | os.PathLike[str]) -> list[Path]:

@@ -283,7 +283,7 @@ class Timing:
         from pendulab.hil.protocol import MAX_DELAY
 
         if isinstance(self.delay, bool) or not isinstance(self.delay, int) or not 0 <= self.delay <= MAX_DELAY:
-            raise UserError(f"--delay {self.delay} must be a whole number of control periods from 0 to {MAX_DELAY} (the rig runs at 1 to 3)")
+            raise UserError(f"--delay {self.delay} must be a whole number of control periods from 0 to {MAX_DELAY} (give the N that 'pendulab lab' measured on the rig: its timing.json, delay_periods)")
 
 
 @dataclass(frozen=True)

@@ -86,10 +86,19 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
             except (OSError, ValueError) as exc:
                 raise UserError(f"cannot read {folder / 'metrics.json'}: {exc}; rewrite it or remove it") from None
         source = str(meta.get("source", "simulation"))
+    for name in ("t", "alpha", "x"):
+        bad = np.flatnonzero(~np.isfinite(np.asarray(columns[name], dtype=float)))
+        if bad.size:
+            # Said as it is: an aligned comparison of such a run would report "no poke found".
+            where = f"t = {columns['t'][bad[0]]:.4g} s" if name != "t" else f"sample {bad[0] + 1}"
+            raise UserError(f"run {path}: {name} is not a number (NaN or inf) from {where} on ({bad.size} samples); "
+                            "the file is damaged or was written by a failed run: compare an intact run")
     poke = None
     params = meta.get("parameters") if isinstance(meta.get("parameters"), Mapping) else None
     if source != "rig" and params and "poke_start" in params and source != "old lab":
         poke = float(np.ravel(params["poke_start"])[0])
+    if metrics.get("verdict") == "cut before the poke":
+        raise UserError(f"run {path} was {metrics.get('not_reported') or 'cut before the poke'}; a comparison aligns runs at their poke")
     if poke is None and metrics.get("poke_start_detected_s") is not None:
         poke = float(metrics["poke_start_detected_s"])
     if poke is None:
@@ -117,6 +126,10 @@ def nrmse(run: ComparedRun, reference: ComparedRun, name: str = "alpha", *, wind
     return float(np.sqrt(np.mean((y - y_ref[keep]) ** 2)) / span)
 
 
+#: A poke's speed, in encoder steps per 10 ms, at least (150 rad/s^2 for 5 ms: 6 steps of the 4096-count encoder).
+POKE_STEPS = 3
+
+
 def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: float | None = None,
                 before: float | None = None) -> float | None:
     """Onset of the poke in a measured angle: where the angular velocity jumps.
@@ -125,7 +138,7 @@ def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: floa
     10 ms, which averages the encoder steps away) jumps within a few milliseconds to the largest value
     of the run before any cut. The onset is the first sample where the speed reaches half that value
     (at most a few ms after the true start for a pulse of 5 ms). None when nothing moves by more than
-    the quantization.
+    :data:`POKE_STEPS` encoder steps per difference window.
     """
     t = np.asarray(t, dtype=float)
     alpha = np.asarray(alpha, dtype=float)
@@ -141,7 +154,9 @@ def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: floa
     h = float(np.median(np.diff(ts)))
     w = max(1, int(round(0.005 / h)))
     speed = np.abs(seg[2 * w:] - seg[: -2 * w]) / (ts[2 * w:] - ts[: -2 * w])
-    if speed.size == 0 or speed.max() < 2 * max(q_alpha, 1e-9) / (2 * w * h):
+    # A poke moves the angle by several encoder steps per difference window; the controller's catch after
+    # the hand let go (a held angle of half a degree) stays within two.
+    if speed.size == 0 or speed.max() < POKE_STEPS * max(q_alpha, 1e-9) / (2 * w * h):
         return None
     first = int(np.argmax(speed >= 0.5 * speed.max()))
     return float(ts[first + w])

@@ -24,7 +24,7 @@ from __future__ import annotations
 import csv
 import io
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -54,9 +54,13 @@ class RampLog:
     source : str
         Where the log came from (file name or ``"virtual rig"``).
     interrupted : bool
-        The run was stopped early (Ctrl-C); the log holds what was measured until then.
+        The run was stopped early (Ctrl-C, a signal, the rig); the log holds what was measured until then.
     events : tuple of (time, text)
         Notes of the procedure (iterations, breakaways, track limits).
+    end_reason : str
+        Why a ramp test ended early ("" when it did not).
+    iterations_done, iterations_done_at : int or None, float or None
+        Ramp test: how many iterations finished, and the time the last of them finished.
     """
 
     t: np.ndarray
@@ -66,6 +70,9 @@ class RampLog:
     source: str = ""
     interrupted: bool = False
     events: tuple[tuple[float, str], ...] = field(default=())
+    end_reason: str = ""
+    iterations_done: int | None = None
+    iterations_done_at: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("t", "V", "x", "alpha"):
@@ -90,13 +97,13 @@ class RampLog:
         """Samples ``first`` to ``stop - 1``."""
         part = slice(first, stop)
         alpha = None if self.alpha is None else self.alpha[part]
-        return RampLog(self.t[part], self.V[part], self.x[part], alpha, self.source, self.interrupted, self.events)
+        return replace(self, t=self.t[part], V=self.V[part], x=self.x[part], alpha=alpha)
 
     def between(self, start: float, stop: float) -> "RampLog":
         """The samples with ``start <= t < stop``."""
         keep = (self.t >= start) & (self.t < stop)
         alpha = None if self.alpha is None else self.alpha[keep]
-        return RampLog(self.t[keep], self.V[keep], self.x[keep], alpha, self.source, self.interrupted, self.events)
+        return replace(self, t=self.t[keep], V=self.V[keep], x=self.x[keep], alpha=alpha)
 
 
 def validate_log(log: RampLog) -> None:
@@ -210,6 +217,13 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
             return line.split()
         return next(csv.reader([line], delimiter=delimiter))
 
+    if len(lines) > 1 and not text.endswith(("\n", "\r")):
+        # Every writer ends its rows with a line end; a last row without one was cut off mid-write
+        # (a crash, a full disk, a copy stopped early), possibly mid-number, which would read as a wrong value.
+        raise CalibrationError(
+            f"log {path}, line {lines[-1][0]}: the file ends in the middle of this row (no line end): it was cut off; "
+            f"delete that line (or add a line end if the row is complete) and run again"
+        )
     header = [h.strip() for h in split(header_line)]
     if any(_is_number(h) for h in header):
         raise CalibrationError(f"log {path} has no header line; the first line must name the columns, e.g. 't,V,x'")
@@ -425,6 +439,15 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     data = {signal: _two_column(file) for signal, file in found.items()}
     t0 = max(d[0, 0] for d in data.values())
     t1 = min(d[-1, 0] for d in data.values())
+    spans = {signal: float(d[-1, 0] - d[0, 0]) for signal, d in data.items()}
+    longest = max(spans.values())
+    short = min(spans, key=spans.__getitem__)
+    if spans[short] < 0.5 * longest:
+        # The signals are used where all of them were logged: one cut short would silently cut the others.
+        raise CalibrationError(
+            f"old-lab log folder {folder}: {found[short].name} covers {spans[short]:.3g} s but the other signals "
+            f"{longest:.3g} s; it looks cut short (copied or saved incompletely): replace it with the complete file"
+        )
     if not t1 > t0:
         raise CalibrationError(f"old-lab log folder {folder}: the signals do not overlap in time; they must come from one run")
     period = min(float(np.median(np.diff(d[:, 0]))) for d in data.values())

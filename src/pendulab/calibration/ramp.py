@@ -15,8 +15,10 @@ One iteration, for each direction (+ then -):
 
 Each iteration is announced through ``on_iteration(i, n)``. Whenever the cart passes
 ``track_limit`` the voltage drops to 0 and the next centring backs it off. Ctrl-C (or any
-``KeyboardInterrupt``, also from a callback) switches the motor off and returns what was measured
-(``log.interrupted`` is then true).
+``KeyboardInterrupt``, also from a callback or a signal) and a rig that ends the test
+(:class:`~pendulab.calibration.rig.RigEnded`: a fault, a restart, its watchdog, a lost link) switch the
+motor off and return what was measured: ``log.interrupted`` is then true, ``log.end_reason`` says why,
+and ``log.iterations_done`` iterations finished by ``log.iterations_done_at``.
 
 Examples
 --------
@@ -36,7 +38,7 @@ from typing import Callable
 import numpy as np
 
 from pendulab.calibration.logs import RampLog
-from pendulab.calibration.rig import Rig
+from pendulab.calibration.rig import Rig, RigEnded
 from pendulab.errors import CalibrationError
 
 
@@ -208,6 +210,8 @@ def run_ramp_test(
     progress = on_progress or (lambda text: None)
     run = _Run(rig, settings, progress)
     interrupted = False
+    reason = ""
+    done, done_at = 0, 0.0
     try:
         for i in range(1, iterations + 1):
             run.note(f"iteration {i}")
@@ -233,11 +237,14 @@ def run_ramp_test(
                     run.wait_still()
                 except _Stopped:
                     progress(f"iteration {i} {sign}: a phase timed out; going on")
+            done, done_at = i, rig.time
         run.centre()
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, RigEnded) as exc:
+        # Ctrl-C, a signal (pendulab.hil.realtime.Terminated) or the rig itself: keep what was measured.
         interrupted = True
-        run.note("interrupted: motor off")
-        progress("interrupted: motor off, keeping what was measured")
+        reason = str(exc) if str(exc) else "interrupted (Ctrl-C)"
+        run.note(f"ended early: {reason}; motor off")
+        progress(f"{reason}: motor off, keeping what was measured ({done} of {iterations} iteration(s) finished)")
     finally:
         try:
             rig.stop()
@@ -252,4 +259,7 @@ def run_ramp_test(
         source=getattr(rig, "description", "rig"),
         interrupted=interrupted,
         events=tuple(run.events),
+        end_reason=reason,
+        iterations_done=done,
+        iterations_done_at=done_at if interrupted else float(run.t[-1]),
     )

@@ -31,6 +31,14 @@ from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 _NO_PENDULUM = {"Mp": 0.0, "Lp": 0.0, "lp": 0.0, "Ip": 0.0, "Bp": 0.0}
 
 
+class RigEnded(Exception):
+    """The rig ended the test early (a fault, a restart, its watchdog, a lost link, its track limit).
+
+    The ramp test stops there, the motor off, and keeps what was measured (like Ctrl-C); the message
+    names the cause.
+    """
+
+
 class Rig(abc.ABC):
     """A cart on a track that takes a voltage each period and reports its measured position.
 

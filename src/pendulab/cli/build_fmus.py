@@ -8,6 +8,7 @@ from pathlib import Path
 from pendulab.errors import FmuBuildError, UserError
 from pendulab.fmu.build import build_all, default_fmu_dir
 from pendulab.fmu.models import ALL_FMUS
+from pendulab.outputs import check_folder
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -25,6 +26,8 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         raise UserError(f"unknown FMU {unknown[0]!r}; choose from {', '.join(ALL_FMUS)}")
     try:
+        if args.out is not None:
+            check_folder(args.out)
         paths = build_all(args.out, args.names or None)
     except FmuBuildError as exc:
         raise UserError(str(exc).splitlines()[0]) from exc

@@ -109,6 +109,11 @@ def run(args: argparse.Namespace) -> int:
             )
         save_calibration(calibration, out)
         print(f"calibration written to {out}")
+        if args.pendulum == "none" and not args.scale_for:
+            ratio = mass_ratio(PlantParameters.preset(pendulum="long", cart=args.cart)) / mass_ratio(params0)
+            print(f"note: {out} holds the bare cart's friction (logs taken with --pendulum none); with the pendulum on, the "
+                  f"cart presses harder on the track: F1 and F2 are about {ratio:.2f} times higher for the long pendulum. "
+                  f"For simulations with a pendulum, fit with --scale-for long (or short)", flush=True)
     if plot:
         plot_fit(result, plot)
         print(f"plot written to {plot}")

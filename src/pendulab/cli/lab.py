@@ -8,7 +8,14 @@ import math
 import sys
 from pathlib import Path
 
-from pendulab.cli.options import add_controller_options, add_overwrite_option, add_plant_options, controller_from_args, plant_from_args
+from pendulab.cli.options import (
+    add_controller_options,
+    add_overwrite_option,
+    add_plant_options,
+    check_baud,
+    controller_from_args,
+    plant_from_args,
+)
 from pendulab.errors import UserError
 from pendulab.hil.protocol import DEFAULT_MAX_DELAY
 from pendulab.outputs import run_folder
@@ -75,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
                    timing=Timing(method=args.method),
                    supervisor=Supervisor(rig_mode=True, auto_start=False, recentre=args.recentre, swing_up=args.swing_up)).validate()
     params = spec.parameters()
+    check_baud(args.baud)
     folder = run_folder(args.out, f"lab-{args.pendulum}", overwrite=args.overwrite)
     out_dir = folder.path
 
@@ -86,53 +94,58 @@ def run(args: argparse.Namespace) -> int:
     def say(text: str) -> None:
         print(text, flush=True)
 
-    with RigLink.open(args.port, args.baud) as link:
-        identity = link.identify()
-        period = identity.period_us * 1e-6
-        say(f"rig at {args.port}: protocol {identity.protocol}, firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, "
-            f"boot id {identity.boot_id:#010x}, period {identity.period_us} us")
-        # The controller is realized before anything moves: a controller the rules refuse never enables the motor.
-        # The rig's own transport delay is physical: the system has none (timing.delay = 0 here).
-        spec = spec.replace(timing=Timing(stop_time=spec.poke.start + 4.0, step=period, method=args.method)).validate()
-        system = build_system(spec, params)
-        from pendulab.hil.realtime import raise_priority
+    from pendulab.hil.realtime import EndingSignals
 
-        priority = raise_priority()  # before the delay is measured: the session runs at this priority
-        round_trips = link.round_trips()
-        try:
-            if args.delay is None:
-                delay = choose_delay(link, args.max_delay, announce=say)
-            else:
-                delay = args.delay
-            x_limit = float(system.components["supervisor"].start_values.get("x_max", 0.40)) + 0.03
-            link.configure(delay=delay, x_limit=x_limit)
-            link.zero()
-        except LinkLost as exc:
-            raise UserError(f"{exc} (while setting up the session)") from None
-        say(f"transport delay N = {delay} ({priority}); encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
-        folder.prepare(announce=say)
-        with KeySource() as keys:
-            session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say,
-                                 priority=priority)
-            reason, status = session.run()
-    # As simulated: the rig's delay, the supervisor as in simulation (for --compare and the files' meta).
-    spec = spec.replace(timing=dataclasses.replace(spec.timing, delay=delay),
-                        supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up))
-    meta = {**run_meta(spec, params), "recentre": bool(args.recentre), "swing_up": bool(args.swing_up),
-            "port": args.port, "rig_boot_id": identity.boot_id}
-    metrics, timing = write_lab_results(session, Lp=params.Lp, q_alpha=1.0 / identity.pend_counts_per_rad, meta=meta, round_trips=round_trips)
-    if args.plot:
-        from pendulab.analysis.plots import plot_run
-        from pendulab.analysis.results import read_run
+    # SIGTERM/SIGHUP end the session as the end key does (motor off, reason recorded, results written).
+    with EndingSignals() as ending:
+        with RigLink.open(args.port, args.baud) as link:
+            identity = link.identify()
+            period = identity.period_us * 1e-6
+            say(f"rig at {args.port}: protocol {identity.protocol}, firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, "
+                f"boot id {identity.boot_id:#010x}, period {identity.period_us} us")
+            # The controller is realized before anything moves: a controller the rules refuse never enables the motor.
+            # The rig's own transport delay is physical: the system has none (timing.delay = 0 here).
+            spec = spec.replace(timing=Timing(stop_time=spec.poke.start + 4.0, step=period, method=args.method)).validate()
+            system = build_system(spec, params)
+            from pendulab.hil.realtime import raise_priority
 
-        columns, _ = read_run(out_dir)
-        plot_run(columns, out_dir, title=f"rig, {args.pendulum} pendulum", poke_start=metrics.get("poke_start_detected_s") or 0.0)
-    if args.compare:
-        from pendulab.analysis.compare import compare_with_simulation
+            priority = raise_priority()  # before the delay is measured: the session runs at this priority
+            round_trips = link.round_trips()
+            try:
+                if args.delay is None:
+                    delay = choose_delay(link, args.max_delay, announce=say)
+                else:
+                    delay = args.delay
+                x_limit = float(system.components["supervisor"].start_values.get("x_max", 0.40)) + 0.03
+                link.configure(delay=delay, x_limit=x_limit)
+                link.zero()
+            except LinkLost as exc:
+                raise UserError(f"{exc} (while setting up the session)") from None
+            say(f"transport delay N = {delay} ({priority}); encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
+            folder.prepare(announce=say)
+            with KeySource() as keys:
+                session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say,
+                                     priority=priority)
+                reason, status = session.run()
+        ending.disarm()  # the session has ended: its files are written whatever arrives now
+        # As simulated: the rig's delay, the supervisor as in simulation (for --compare and the files' meta).
+        spec = spec.replace(timing=dataclasses.replace(spec.timing, delay=delay),
+                            supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up))
+        meta = {**run_meta(spec, params), "recentre": bool(args.recentre), "swing_up": bool(args.swing_up),
+                "port": args.port, "rig_boot_id": identity.boot_id}
+        metrics, timing = write_lab_results(session, Lp=params.Lp, q_alpha=1.0 / identity.pend_counts_per_rad, meta=meta, round_trips=round_trips)
+        if args.plot:
+            from pendulab.analysis.plots import plot_run
+            from pendulab.analysis.results import read_run
 
-        compare_with_simulation(out_dir, spec, metrics=metrics)
-    lat = timing["answer_latency_ms"]
-    say(f"session: {timing['samples']} samples, answer latency p50 {lat['p50'] or 0:.3f} ms, p99 {lat['p99'] or 0:.3f} ms, "
-        f"{timing['late_commands']} late, {timing['missed_samples']} missed, {timing['crc_errors']} CRC errors")
-    say(f"results in {out_dir}/ (rig_log.csv, run.mat, run.csv, metrics.json, timing.json); ended: {reason}")
-    return status
+            columns, _ = read_run(out_dir)
+            plot_run(columns, out_dir, title=f"rig, {args.pendulum} pendulum", poke_start=metrics.get("poke_start_detected_s") or 0.0)
+        if args.compare:
+            from pendulab.analysis.compare import compare_with_simulation
+
+            compare_with_simulation(out_dir, spec, metrics=metrics)
+        lat = timing["answer_latency_ms"]
+        say(f"session: {timing['samples']} samples, answer latency p50 {lat['p50'] or 0:.3f} ms, p99 {lat['p99'] or 0:.3f} ms, "
+            f"{timing['late_commands']} late, {timing['missed_samples']} missed, {timing['crc_errors']} CRC errors")
+        say(f"results in {out_dir}/ (rig_log.csv, run.mat, run.csv, metrics.json, timing.json); ended: {reason}")
+        return status

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from pendulab.cli.options import add_overwrite_option
 from pendulab.errors import UserError
+from pendulab.outputs import check_output_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,6 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     integral.add_argument("--no-integral", dest="integral", action="store_false", help="no integral state (pendulum default)")
     parser.add_argument("--json", action="store_true", help='print one JSON object {"plant", "states", "K", "closed_loop_poles"}')
     parser.add_argument("--out", metavar="FILE", help="write the design as a controller file (TOML)")
+    add_overwrite_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -48,8 +51,8 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.model.parameters import PlantParameters
 
         params = PlantParameters.preset(args.pendulum)
-    if args.out and not args.out.endswith(".toml"):
-        raise UserError(f"--out {args.out!r} must be a .toml controller file")
+    if args.out:
+        check_output_file(args.out, "--out", suffixes=(".toml",), overwrite=args.overwrite)
     design = design_state_feedback(args.plant, q, None if r is None else r[0], args.integral, params)
     poles = [[float(p.real), float(p.imag)] for p in design.closed_loop_poles]
     if args.json:

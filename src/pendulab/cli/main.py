@@ -95,7 +95,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         print(f"pendulab: error: {exc}", file=sys.stderr)
         return exc.exit_status
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        from pendulab.hil.realtime import Terminated
+
+        if isinstance(exc, Terminated):
+            print(f"pendulab: {exc}", file=sys.stderr)
+            return exc.exit_status
         print("pendulab: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # output piped into 'head' and the like

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from pendulab.errors import UserError
 from pendulab.model.parameters import CARTS, PlantParameters
 from pendulab.spec import Plant
 
@@ -66,3 +67,9 @@ def add_mode_options(parser: argparse.ArgumentParser, *, start: bool = True) -> 
     if start:
         modes.add_argument("--start", choices=("upright", "hanging"), default="upright",
                            help="the pendulum at t = 0 (default upright; hanging needs --swing-up)")
+
+
+def check_baud(baud: int) -> None:
+    """``--baud`` is a positive whole number of bits per second (UserError otherwise)."""
+    if not baud > 0:
+        raise UserError(f"--baud {baud} must be a positive number of bits per second, e.g. 1000000 (the rig's default)")

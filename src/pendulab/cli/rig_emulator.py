@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 from pendulab.cli.options import add_plant_options, plant_from_args
 from pendulab.errors import UserError
@@ -44,6 +44,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     link.add_argument("--stall-for", type=float, default=0.5, metavar="S", help="length of the stall (default 0.5 s)")
     link.add_argument("--close-after", type=float, metavar="S", help="close the port S s after the host connects")
     link.add_argument("--fault-after", type=float, metavar="S", help="report an amplifier fault S s after the host connects")
+    link.add_argument("--dead-encoder", action="append", default=[], metavar="WHICH,S",
+                      help="the cart or pendulum encoder dies (power or cable lost: no more counts) S s after the host connects")
+    link.add_argument("--frozen-encoder", action="append", default=[], metavar="WHICH,S",
+                      help="the cart or pendulum encoder's count freezes S s after the host connects")
     parser.add_argument("--tcp", type=int, metavar="PORT", help="serve one host on TCP 127.0.0.1:PORT instead of a pty (prints socket://...)")
     parser.add_argument("--firmware", nargs="?", const="", metavar="HEX",
                         help="run the real firmware in simavr with the digital twin instead (default: the .hex 'make -C firmware' builds)")
@@ -54,6 +58,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _non_negative(value: float | None, option: str) -> None:
     if value is not None and not (math.isfinite(value) and value >= 0):
         raise UserError(f"{option} {value} must be a number >= 0")
+
+
+def encoder_faults(dead: list[str], frozen: list[str]) -> dict[str, tuple[str, float]]:
+    """``--dead-encoder`` / ``--frozen-encoder`` values (``WHICH,S``) as ``{which: (kind, after)}``."""
+    faults: dict[str, tuple[str, float]] = {}
+    for kind, values in (("dead", dead), ("frozen", frozen)):
+        for text in values:
+            which, _, after = text.partition(",")
+            try:
+                seconds = float(after)
+            except ValueError:
+                seconds = float("nan")
+            if which not in ("cart", "pendulum") or not (math.isfinite(seconds) and seconds >= 0):
+                raise UserError(f"--{kind}-encoder {text!r} must be cart or pendulum and a time >= 0 in s, e.g. --{kind}-encoder pendulum,3")
+            if which in faults:
+                raise UserError(f"the {which} encoder is given two faults; give one")
+            faults[which] = (kind, seconds)
+    return faults
 
 
 def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
@@ -74,6 +96,7 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
         except argparse.ArgumentTypeError as exc:
             raise UserError(f"--friction {exc}") from None
     return EmulatorOptions(
+        encoder_faults=encoder_faults(args.dead_encoder, args.frozen_encoder),
         params=plant_from_args(args, **friction).parameters(),
         raise_after=args.raise_after,
         poke=parse_poke(args.poke) if args.poke else None,
@@ -99,20 +122,34 @@ def run(args: argparse.Namespace) -> int:
         if args.tcp is not None:
             raise UserError("--tcp is not available with --firmware (the twin's link is the firmware's own UART); drop it")
         return run_twin(Path(args.firmware) if args.firmware else None, options)
+    if args.tcp is not None and not 0 <= args.tcp <= 65535:
+        raise UserError(f"--tcp {args.tcp} must be a TCP port from 1 to 65535 (or 0 for any free port), e.g. --tcp 5555")
     if sys.platform == "win32" and args.tcp is None:
         raise UserError("pseudo-terminals do not exist on Windows: use --tcp PORT and 'pendulab lab --port socket://127.0.0.1:PORT'")
     from pendulab.hil.emulator import RigEmulator
-    from pendulab.hil.realtime import raise_priority
+    from pendulab.hil.realtime import EndingSignals, Terminated, raise_priority
 
     emulator = RigEmulator(options)
     emulator.say(f"scheduling: {raise_priority()}")
-    signal.signal(signal.SIGTERM, lambda *_: emulator.stop())
+    # SIGTERM (SIGHUP) stops the emulator in every state: waiting for a client too (raised, not a flag).
+    with EndingSignals():
+        try:
+            return _serve(args, emulator)
+        except KeyboardInterrupt as exc:
+            emulator.say(f"emulator stopped ({'Ctrl-C' if not isinstance(exc, Terminated) else exc.signal})")
+            return 0
+
+
+def _serve(args: argparse.Namespace, emulator: Any) -> int:
     listener = None
     try:
         if args.tcp is not None:
             import socket
 
-            listener = socket.create_server(("127.0.0.1", args.tcp))
+            try:
+                listener = socket.create_server(("127.0.0.1", args.tcp))
+            except OSError as exc:
+                raise UserError(f"--tcp {args.tcp}: cannot listen on 127.0.0.1:{args.tcp} ({exc.strerror or exc}); choose another port") from None
             print(f"socket://127.0.0.1:{listener.getsockname()[1]}", flush=True)
             connection, _ = listener.accept()
             connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -122,8 +159,6 @@ def run(args: argparse.Namespace) -> int:
         emulator.say("rig emulator ready: pendulum hanging, cart centred, motor off")
         why = emulator.run()
         emulator.say(f"emulator ends ({why})")
-    except KeyboardInterrupt:
-        emulator.say("emulator stopped (Ctrl-C)")
     finally:
         emulator.close()
         if listener is not None:

@@ -7,8 +7,15 @@ import json
 
 import numpy as np
 
-from pendulab.cli.options import add_controller_options, add_plant_options, controller_from_args, plant_parameters_from_args
+from pendulab.cli.options import (
+    add_controller_options,
+    add_overwrite_option,
+    add_plant_options,
+    controller_from_args,
+    plant_parameters_from_args,
+)
 from pendulab.errors import UserError
+from pendulab.outputs import check_output_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -23,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--output", choices=("alpha", "x", "tip"), default="alpha", help="output signal (default alpha)")
     parser.add_argument("--json", action="store_true", help='print one JSON object {"zeros", "poles", "gain"}')
     parser.add_argument("--root-locus", metavar="FILE", help="write the root locus of the loop Lp*C(s)*G(s) as PNG (needs a controller)")
+    add_overwrite_option(parser)
     add_controller_options(parser)
     parser.set_defaults(func=run)
 
@@ -88,6 +96,8 @@ def run_seesaw(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.plant == "seesaw":
         return run_seesaw(args)
+    if args.root_locus:
+        check_output_file(args.root_locus, "--root-locus", suffixes=(".png",), overwrite=args.overwrite)
     params = plant_parameters_from_args(args)
     if params.Mp == 0:
         raise UserError("the cart without a pendulum has no angle to linearize; choose --pendulum long or short")

@@ -18,7 +18,6 @@ Examples
 
 from __future__ import annotations
 
-import gc
 import math
 import os
 import random
@@ -30,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from pendulab.hil import protocol as P
+from pendulab.hil.realtime import no_garbage_collection
 from pendulab.model.parameters import PlantParameters
 
 FIRMWARE_VERSION = (1, 0, 0)
@@ -62,6 +62,9 @@ class EmulatorOptions:
     stall_for: float = 0.5
     close_after: float | None = None
     fault_after: float | None = None
+    #: Encoder faults: ``{"cart"|"pendulum": (kind, after)}``, kind "dead" (lost power or cable: the count stops
+    #: after one last step towards zero of its quadrature phase) or "frozen" (the disc stuck: the count holds).
+    encoder_faults: dict[str, tuple[str, float]] = field(default_factory=dict)
     cart_step: float = 22.75e-6                  # m per count
     pendulum_counts_per_rev: int = 4096
     seed: int | None = None
@@ -125,6 +128,8 @@ class RigEmulator:
         self._write: Callable[[bytes], None] | None = None
         self._stop = False
         self.connected_at: float | None = None
+        self._last_counts: dict[str, int] = {}
+        self._failed: dict[str, int] = {}
         self.held = False
         self.raised = False
         self._boot()
@@ -334,8 +339,8 @@ class RigEmulator:
         x, _, alpha, _, _ = self.plant.state()
         if self.held:
             alpha = HOLD_ANGLE
-        cart = self._cart_raw(x) - self.zero_cart
-        pend = self._pend_raw(alpha) - self.zero_pend
+        cart = self._encoder("cart", self._cart_raw(x) - self.zero_cart, now)
+        pend = self._encoder("pendulum", self._pend_raw(alpha) - self.zero_pend, now)
         status_late = 0
         due: P.Command | None = None
         if len(self.sample_seqs) >= self.delay:
@@ -385,6 +390,20 @@ class RigEmulator:
                            status, self.late, self.applied))
         self.tick += 1
 
+    def _encoder(self, name: str, count: int, now: float) -> int:
+        """The count an encoder gives: the true one, or a dead or frozen encoder's (from its fault time on)."""
+        fault = self.o.encoder_faults.get(name)
+        since = None if self.connected_at is None else now - self.connected_at
+        if fault is None or since is None or since < fault[1]:
+            self._last_counts[name] = count
+            return count
+        if name not in self._failed:
+            held = self._last_counts.get(name, count)
+            # A dead encoder's lines drop low: the decoder sees one last edge, to the phase 0 below its count.
+            self._failed[name] = held - held % 4 if fault[0] == "dead" else held
+            self.say(f"{name} encoder {fault[0]}: its count stays at {self._failed[name]}")
+        return self._failed[name]
+
     # ------------------------------------------------------------------ the person
     def _raise(self) -> None:
         self.held = True
@@ -408,13 +427,13 @@ class RigEmulator:
     def run(self, duration: float | None = None) -> str:
         """Run in real time until stopped (or for ``duration`` s); returns why it ended."""
         assert self._read is not None, "open_pty() or use_socket() first"
+        with no_garbage_collection():  # none in the real-time loop (see pendulab.hil.realtime)
+            return self._run(duration)
+
+    def _run(self, duration: float | None) -> str:
         period = self.o.period
         stalled_until = -1.0
         stalled_said = False
-        # No cyclic garbage collection in the real-time loop (see pendulab.hil.session).
-        gc.collect()
-        gc.freeze()
-        gc.disable()
         t0 = time.perf_counter()
         self._clock = lambda: time.perf_counter() - t0
         next_tick = t0
@@ -437,6 +456,12 @@ class RigEmulator:
                 elif left > 3e-4:
                     time.sleep(left - 3e-4)
             now = time.perf_counter() - t0
+            overslept = now - (next_tick - t0)
+            if overslept > 2 * period and self.last_command_time is not None:
+                # This process did not run (the OS gave the core to others): a rig's timer never stops,
+                # and the host had no sample to answer meanwhile, so that time does not count against
+                # the host in the watchdog (a 90 ms stall of this emulator on a loaded host tripped it).
+                self.last_command_time += overslept - period
             if duration is not None and now >= duration:
                 return "duration"
             since = None if self.connected_at is None else now - self.connected_at

@@ -115,6 +115,8 @@ def twin_command(hex_path: Path, options: EmulatorOptions) -> list[str]:
         command += ["--byte-error-rate", repr(options.byte_error_rate)]
     if options.seed is not None:
         command += ["--seed", str(options.seed)]
+    for which, (kind, after) in options.encoder_faults.items():
+        command += [f"--{kind}-encoder", f"{which},{after!r}"]
     return command
 
 

@@ -20,6 +20,9 @@ from typing import Any
 from pendulab.errors import UserError
 from pendulab.hil import protocol as P
 
+#: Tries of a set-up request (CONFIGURE, ZERO, STREAM on) whose acknowledgement does not come.
+REQUEST_TRIES = 3
+
 
 class LinkLost(Exception):
     """The port failed or went silent; the message says how."""
@@ -148,8 +151,13 @@ class RigLink:
         except Exception:  # noqa: BLE001
             pass
         before = self.bytes_in
-        self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
-        item = self.expect(P.Identity, timeout)
+        item = None
+        for _ in range(REQUEST_TRIES):
+            self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
+            item = self.expect(P.Identity, timeout)
+            if item is not None or self.bytes_in == before:
+                break  # an answer, or silence: asking again would not change it
+            # Bytes came but no valid IDENTITY: on a noisy link the answer may have been corrupted; ask again.
         if item is None:
             if self.bytes_in > before:
                 raise UserError(
@@ -197,22 +205,35 @@ class RigLink:
         else:
             x_max = int(x_limit * identity.cart_counts_per_m)
             x_min = -x_max
-        self.send(P.Configure, period_us=identity.period_us, watchdog_ms=watchdog_ms, delay=delay,
-                  x_min=x_min, x_max=x_max, v_max_mv=int(round(v_max * 1000)))
-        ack = self._acked(P.Configure)
+        ack = self._request(P.Configure, period_us=identity.period_us, watchdog_ms=watchdog_ms, delay=delay,
+                            x_min=x_min, x_max=x_max, v_max_mv=int(round(v_max * 1000)))
         if ack.result != P.ACK_OK:
             raise UserError(f"the rig refused the configuration (delay {delay}, watchdog {watchdog_ms} ms, track ±{x_limit} m): result {ack.result}")
         self.delay = delay
 
+    def _request(self, kind: type[P.Frame], tries: int = REQUEST_TRIES, **fields: Any) -> P.Ack:
+        """Send a set-up request and wait for its acknowledgement, again when either is lost on a noisy link.
+
+        CONFIGURE, ZERO and STREAM on are idempotent on the rig: a repeated one changes nothing.
+        """
+        for attempt in range(tries):
+            self.send(kind, **fields)
+            try:
+                return self._acked(kind)
+            except LinkLost:
+                if attempt == tries - 1:
+                    raise LinkLost(f"link lost: the rig at {self.name} did not acknowledge {kind.__name__.upper()} "
+                                   f"in {tries} tries of 0.5 s") from None
+        raise AssertionError("unreachable")
+
     def zero(self, which: int = P.ZERO_CART | P.ZERO_PENDULUM) -> None:
-        self.send(P.Zero, which=which)
-        self._acked(P.Zero)
+        self._request(P.Zero, which=which)
 
     def stream(self, on: bool) -> None:
-        self.send(P.Stream, on=int(on))
         if on:
-            self._acked(P.Stream)
+            self._request(P.Stream, on=1)
         else:
+            self.send(P.Stream, on=0)
             try:  # on the way out: the ack is welcome, not needed
                 self._acked(P.Stream, timeout=0.1)
             except LinkLost:
@@ -223,6 +244,25 @@ class RigLink:
     def command(self, answers: int, voltage: float, *, enable: bool, clear: bool = False) -> None:
         mv = int(round(max(-32.0, min(32.0, voltage)) * 1000))
         self.send(P.Command, answers=answers, voltage_mv=mv, flags=(P.ENABLE if enable else 0) | (P.CLEAR if clear else 0))
+
+    def silence_cause(self, silent_ms: float, timeout: float = 0.3) -> Exception:
+        """Why the samples stopped: a restarted rig answers IDENTIFY with a new boot id; a dead link does not answer.
+
+        Returns (does not raise) :class:`RigRestarted` or :class:`LinkLost`, whose message says which.
+        """
+        old = self.identity
+        try:
+            self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
+            item = self.expect(P.Identity, timeout)
+        except LinkLost as exc:
+            return exc
+        if item is None:
+            return LinkLost(f"link lost: no data from the rig for {silent_ms + timeout * 1e3:.0f} ms")
+        identity: P.Identity = item[0]  # type: ignore[assignment]
+        if old is not None and identity.boot_id != old.boot_id:
+            return RigRestarted(f"the rig restarted (boot id {old.boot_id:#010x} -> {identity.boot_id:#010x})")
+        return LinkLost(f"link lost: no sample for {silent_ms:.0f} ms, then the rig (same boot id) answered again: the link stalled "
+                        "or the rig stopped streaming")
 
     def motor_off(self, answers: int = 0) -> None:
         """Zero volts, amplifier disabled, stream stopped; never raises (used on every way out)."""

@@ -4,14 +4,23 @@ The calibration procedure (:func:`pendulab.calibration.ramp.run_ramp_test`) is t
 the virtual rig; here each ``step`` waits for the rig's next sample and answers it, so the rig's
 clock paces the test. The commanded voltage reaches the cart N periods later (the link's transport
 delay), which the slow ramps do not notice.
+
+Every sample is streamed to a log (``t, V, x, tick``: the voltage the rig reports it applied) as it
+arrives, so a crash or any ending keeps what was measured. Whatever ends the test early (a fault, a
+restart, the rig's watchdog or track limit, a lost link) raises :class:`~pendulab.calibration.rig.RigEnded`
+naming it, after that sample is logged.
 """
 
 from __future__ import annotations
 
-from pendulab.calibration.rig import Rig
-from pendulab.errors import CalibrationError
+from typing import Any
+
+from pendulab.calibration.rig import Rig, RigEnded
 from pendulab.hil import protocol as P
-from pendulab.hil.link import Encoders, LinkLost, RigLink
+from pendulab.hil.link import Encoders, LinkLost, RigLink, RigRestarted
+
+#: Columns of the streamed ramp-test log ('pendulab fit' reads t, V, x).
+LOG_COLUMNS = ("t", "V", "x", "tick")
 
 #: No sample for this long during the ramp test: the link is lost.
 SAMPLE_TIMEOUT = 0.25
@@ -20,7 +29,7 @@ SAMPLE_TIMEOUT = 0.25
 class HilRig(Rig):
     """A rig on a :class:`RigLink` (already identified and configured)."""
 
-    def __init__(self, link: RigLink) -> None:
+    def __init__(self, link: RigLink, log: Any = None) -> None:
         if link.identity is None:
             raise ValueError("identify the rig first")
         self.link = link
@@ -33,33 +42,47 @@ class HilRig(Rig):
         self._streaming = False
         #: The voltage the rig applied from each sample's tick on (its own report), one per sample.
         self.applied: list[float] = []
+        #: A :class:`~pendulab.analysis.results.RunLog` with :data:`LOG_COLUMNS`, or None.
+        self.log = log
+        self._last_tick: int | None = None
 
     @property
     def time(self) -> float:
         return self._k * self.period
 
-    def _sample(self) -> P.Sample:
+    def _sample(self) -> tuple[P.Sample, float]:
+        """The next sample, logged, and the cart's position; :class:`RigEnded` when the rig ended the test."""
         item = self.link.next_sample(SAMPLE_TIMEOUT)
         if item is None:
-            raise CalibrationError(f"link lost: no sample from {self.link.name} for {SAMPLE_TIMEOUT * 1e3:.0f} ms; the motor is off")
+            cause = self.link.silence_cause(SAMPLE_TIMEOUT * 1e3)
+            raise RigEnded(str(cause) if isinstance(cause, RigRestarted) else f"{cause} (no sample from {self.link.name})")
         sample: P.Sample = item[0]  # type: ignore[assignment]
+        if self._last_tick is not None and sample.tick <= self._last_tick:
+            raise RigEnded(f"the rig restarted (its tick went back from {self._last_tick} to {sample.tick})")
+        self._last_tick = sample.tick
+        x, _ = self._encoders.update(sample)
+        applied = sample.voltage_mv / 1000.0
+        if self.log is not None:
+            self.log.append((self._k * self.period, applied, x, sample.tick))
         if sample.status & P.ST_FAULT:
-            raise CalibrationError("the rig reports a fault; the motor is off")
+            raise RigEnded("the rig reports a fault (amplifier or encoder); check the rig")
         # A flag latched before this test is cleared by the first command, which acts N periods later.
         settled = self._k > getattr(self.link, "delay", 1) + 1
         if sample.status & P.ST_WATCHDOG and settled:
-            raise CalibrationError("the rig's watchdog tripped (answers stopped reaching it); the motor is off")
-        return sample
+            raise RigEnded("the rig's watchdog tripped: the host's answers stopped reaching it in time")
+        if sample.status & P.ST_LIMIT and settled:
+            raise RigEnded("the rig's own track limit cut the motor; centre the cart and start again")
+        self._x = x
+        return sample, applied
 
     def reset(self) -> float:
         if not self._streaming:
             self.link.stream(True)
             self._streaming = True
         self._k = 0
-        self._pending = self._sample()
-        self.applied = [self._pending.voltage_mv / 1000.0]
-        x, _ = self._encoders.update(self._pending)
-        return x
+        self._pending, applied = self._sample()
+        self.applied = [applied]
+        return self._x
 
     def step(self, voltage: float) -> float:
         if self._pending is None:
@@ -68,15 +91,12 @@ class HilRig(Rig):
         try:
             self.link.command(self._pending.seq, voltage, enable=True, clear=self._first)
         except LinkLost as exc:
-            raise CalibrationError(str(exc)) from None
+            raise RigEnded(str(exc)) from None
         self._first = False
-        self._pending = self._sample()
-        if self._pending.status & P.ST_LIMIT and self._k > getattr(self.link, "delay", 1) + 1:
-            raise CalibrationError("the rig's own track limit cut the motor; centre the cart and start again")
         self._k += 1
-        self.applied.append(self._pending.voltage_mv / 1000.0)
-        x, _ = self._encoders.update(self._pending)
-        return x
+        self._pending, applied = self._sample()
+        self.applied.append(applied)
+        return self._x
 
     def acting_voltages(self, n: int):
         """The voltage that acted over each of the first ``n`` periods (the commands arrive N periods late).

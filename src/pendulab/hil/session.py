@@ -13,7 +13,7 @@ turns the motor off first, then saves the log with the reason.
 
 from __future__ import annotations
 
-import gc
+import contextlib
 import json
 import math
 import time
@@ -30,6 +30,7 @@ from pendulab.errors import UserError
 from pendulab.fmu.models.supervisor.config import COMMANDS, KEYS, RUNNING, STATES, TRIP_REASONS, TRIPPED, rig_to_upright
 from pendulab.hil import protocol as P
 from pendulab.hil.link import Encoders, LinkLost, RigLink, RigRestarted
+from pendulab.hil.realtime import Terminated, no_garbage_collection
 
 #: The rig's stand-in name in the wiring.
 RIG = "plant"
@@ -72,6 +73,67 @@ class Timing:
         }
 
 
+#: A cart driven at least this hard (V, the rig's applied voltage; the lab's cart breaks away at about 0.9 V) ...
+DRIVE_VOLTAGE = 1.5
+#: ... for this long in all (s) since the cart encoder's last count has moved: a dead or frozen encoder.
+DRIVE_TIME = 0.15
+#: While the controller balances the pendulum, the cart moves all the time: no count for this long (s) while
+#: the motor applied at least BALANCE_VOLTAGE (V) for BALANCE_DRIVE (s) of it is a dead or frozen cart encoder.
+BALANCE_STILL = 1.0
+BALANCE_VOLTAGE = 1.0
+BALANCE_DRIVE = 0.1
+#: The cart travelled this far (m) with the pendulum up and its encoder gave no count: a dead or frozen encoder
+#: (moving the pivot 15 mm turns a balanced pendulum by far more than its encoder's step).
+PIVOT_TRAVEL = 0.015
+
+
+class EncoderWatch:
+    """Finds a dead or frozen encoder from the motion the rig's own numbers imply.
+
+    The cart: the motor drives it (``|V| >=`` :data:`DRIVE_VOLTAGE` for :data:`DRIVE_TIME` in all), or the
+    controller balances the pendulum for :data:`BALANCE_STILL` (which moves the cart all the time), and its
+    count does not change. The pendulum: held up by the controller while the cart travels :data:`PIVOT_TRAVEL`, its
+    count does not change. :meth:`update` returns what is wrong, in words, or None.
+
+    Examples
+    --------
+    >>> watch = EncoderWatch(period=0.001)          # 5 V on a cart whose count never changes:
+    >>> next(k for k in range(1000) if watch.update(0.0, 0.0, 5.0, running=False))   # periods until it is found
+    150
+    """
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self.x: float | None = None
+        self.theta: float | None = None
+        self.driven = self.still = self.pushed = 0.0
+        self.x_at_theta = 0.0
+
+    def update(self, x: float, theta: float, voltage: float, *, running: bool) -> str | None:
+        if x != self.x:
+            self.x, self.driven, self.still, self.pushed = x, 0.0, 0.0, 0.0
+        else:
+            self.still += self.period
+            if abs(voltage) >= DRIVE_VOLTAGE:
+                self.driven += self.period
+                if self.driven > DRIVE_TIME:
+                    return (f"the cart encoder gave no count while the motor drove the cart at {abs(voltage):.1f} V for "
+                            f"{self.driven * 1e3:.0f} ms: a dead or frozen cart encoder")
+            if abs(voltage) >= BALANCE_VOLTAGE and running:
+                self.pushed += self.period
+            if not running:
+                self.still = self.pushed = 0.0
+            elif self.still > BALANCE_STILL and self.pushed > BALANCE_DRIVE:
+                return (f"the cart encoder gave no count for {self.still:.1f} s while the controller balanced the pendulum "
+                        f"(the motor at {BALANCE_VOLTAGE:g} V or more for {self.pushed * 1e3:.0f} ms of it): a dead or frozen cart encoder")
+        if theta != self.theta or not running:
+            self.theta, self.x_at_theta = theta, x
+        elif abs(x - self.x_at_theta) > PIVOT_TRAVEL:
+            return (f"the pendulum encoder gave no count while the cart moved {abs(x - self.x_at_theta) * 1e3:.0f} mm under the "
+                    "balanced pendulum: a dead or frozen pendulum encoder")
+        return None
+
+
 #: Largest share of late answers a delay may show when it is tried (the bar for a session is 0.1 %).
 LATE_ALLOWED = 0.001
 
@@ -80,10 +142,18 @@ def choose_delay(link: RigLink, max_delay: int, *, samples: int = 1000, announce
     """The smallest transport delay N (periods) at which the host's answers reach the rig in time.
 
     Tried on the sample stream itself (motor disabled, ``samples`` periods per N): N holds when at
-    most :data:`LATE_ALLOWED` of the answers are late.
+    most :data:`LATE_ALLOWED` of the answers are late, not counting the answers a noisy link explains.
+    A corrupted frame is an answer missed whatever N is: a sample the host never received (a CRC error
+    or a gap in the sample numbers, both counted here) gets no answer, and a command corrupted on its
+    way to the rig arrives as nothing; the second kind is as frequent as the first on a link that
+    corrupts both directions alike. Those late answers are allowed (and said: a noisy link needs a
+    cable, not a longer delay); when even that does not hold at ``max_delay``, the error names the
+    cause it measured.
     """
+    last_late, last_corrupted = 0, 0
     for n in range(1, max_delay + 1):
         link.configure(delay=n)
+        errors0, lost0 = link.reader.errors, link.reader.lost
         link.stream(True)
         late = 0
         got = 0
@@ -91,7 +161,15 @@ def choose_delay(link: RigLink, max_delay: int, *, samples: int = 1000, announce
             while got < samples:
                 item = link.next_sample(SILENCE)
                 if item is None:
-                    raise LinkLost(f"link lost: no sample from the rig for {SILENCE * 1e3:.0f} ms while measuring the delay")
+                    link.stream(False)
+                    cause = link.silence_cause(SILENCE * 1e3)
+                    if isinstance(cause, RigRestarted) or link.identity is None:
+                        raise cause
+                    if "answered again" not in str(cause):
+                        raise LinkLost(f"{cause} while measuring the delay")
+                    # The rig is there but its samples stalled (a busy host or link): N failed, try the next.
+                    late = samples
+                    break
                 sample = item[0]
                 link.command(sample.seq, 0.0, enable=False, clear=got == 0)
                 if got > n + 2 and sample.status & P.ST_LATE:
@@ -99,13 +177,25 @@ def choose_delay(link: RigLink, max_delay: int, *, samples: int = 1000, announce
                 got += 1
         finally:
             link.stream(False)
-        if late <= LATE_ALLOWED * samples:
-            announce(f"transport delay: N = {n} period(s) holds ({late} of {samples} answers late)")
+        corrupted = (link.reader.errors - errors0) + (link.reader.lost - lost0)
+        # Each corrupted frame coming in costs one answer; as many going out, half again for safety.
+        explained = int(np.ceil(2.5 * corrupted))
+        last_late, last_corrupted = late, corrupted
+        noisy = f"; {corrupted} frames from the rig corrupted or lost: a noisy link, each costs an answer" if corrupted else ""
+        if late <= LATE_ALLOWED * samples + explained:
+            announce(f"transport delay: N = {n} period(s) holds ({late} of {samples} answers late{noisy})")
             return n
-        announce(f"transport delay: N = {n} is too short ({late} of {samples} answers late)")
+        announce(f"transport delay: N = {n} is too short ({late} of {samples} answers late{noisy})")
+    if last_corrupted and last_late <= 4 * LATE_ALLOWED * samples + 2.5 * last_corrupted * 2:
+        raise UserError(
+            f"the link corrupts frames: {last_corrupted} of {samples} frames from the rig arrived corrupted or not at all "
+            f"(CRC errors), and {last_late} answers were late even with a delay of {max_delay} periods; check the USB cable "
+            f"and its connectors, use a shorter cable or another USB port, keep it away from the motor's power leads"
+        )
     raise UserError(
-        f"the link is too slow for the rig: answers were late even with a delay of {max_delay} periods; connect the rig "
-        f"directly (not through a hub), close other programs, or allow more with --max-delay"
+        f"the link is too slow for the rig: answers were late even with a delay of {max_delay} periods"
+        + (f" ({last_corrupted} frames also arrived corrupted)" if last_corrupted else "")
+        + "; connect the rig directly (not through a hub), close other programs, or allow more with --max-delay"
     )
 
 
@@ -136,6 +226,7 @@ class LabSession:
         self.period = self.identity.period_us * 1e-6
         self.timing = Timing()
         self.reason = ""
+        self.status = 1
         self.priority = priority
 
     # ------------------------------------------------------------------ wiring
@@ -204,18 +295,15 @@ class LabSession:
         status = 1
         last_seq = 0
         master = Master(sub)
+        quiet = contextlib.ExitStack()
         try:
             master.initialize(0.0, self.stop_time)
             self._wire(master)
             sup, ctrl = master.instances["supervisor"], master.instances["controller"]
             encoders = Encoders(self.identity)
+            watch = EncoderWatch(self.period)
             link = self.link
-            # A full garbage collection of everything the FMUs and libraries loaded takes milliseconds,
-            # more than a period: freeze what exists now, and collect no cycles during the session
-            # (the loop makes none; everything it allocates is freed by reference counting).
-            gc.collect()
-            gc.freeze()
-            gc.disable()
+            quiet.enter_context(no_garbage_collection())
             link.stream(True)
             swing_up = bool(self.system.components["supervisor"].start_values.get("swing_up"))
             self.announce("streaming: press s to start, p to pause, e to end (r re-arms after a trip); " + (
@@ -298,6 +386,9 @@ class LabSession:
                     state = new_state
                 if sample.status & P.ST_FAULT:
                     raise RigFault("the rig reports a fault (amplifier or encoder); check the rig")
+                wrong = watch.update(x, theta, sample.voltage_mv / 1000.0, running=state == RUNNING)
+                if wrong:
+                    raise RigFault(f"{wrong}; check its cable and coupling")
                 if sample.status & P.ST_WATCHDOG and not clear and timing.samples > 3 * link.delay + 5:
                     raise RigFault("the rig's watchdog tripped: the host's answers stopped reaching it in time")
                 if sample.status & P.ST_LIMIT and not limit_said:
@@ -314,6 +405,8 @@ class LabSession:
                 sup.step(t, self.period)
                 if state == RUNNING:
                     ctrl.step(t, self.period)
+        except Terminated as exc:
+            self.reason, status = f"ended by {exc.signal} (a closed terminal, 'timeout' or a process manager)", exc.exit_status
         except KeyboardInterrupt:
             self.reason, status = "interrupted (Ctrl-C)", 130
         except (LinkLost, RigRestarted, RigFault) as exc:
@@ -326,26 +419,18 @@ class LabSession:
             self.reason, status = f"error: {type(exc).__name__}: {exc}", 1
         finally:
             self.link.motor_off(last_seq)
-            gc.enable()
-            gc.unfreeze()
+            quiet.close()
             log.close()
             master.close()
             timing.crc_errors = self.link.reader.errors
             timing.lost_frames = self.link.reader.lost
+        self.status = status
         self.announce(f"motor off; session ended: {self.reason}")
         return self.reason, status
 
     def _check_rig_after_silence(self) -> None:
         """Samples stopped: a restarted rig answers with a new boot id; a dead link does not answer."""
-        old = self.identity
-        self.link.send(P.Identify, protocol=P.PROTOCOL_VERSION)
-        item = self.link.expect(P.Identity, 0.3)
-        if item is None:
-            raise LinkLost(f"link lost: no data from the rig for {SILENCE * 1e3 + 300:.0f} ms")
-        identity = item[0]
-        if old is not None and identity.boot_id != old.boot_id:  # type: ignore[attr-defined]
-            raise RigRestarted(f"the rig restarted (boot id {old.boot_id:#010x} -> {identity.boot_id:#010x})")  # type: ignore[attr-defined]
-        raise LinkLost("link lost: the rig answers but stopped streaming samples")
+        raise self.link.silence_cause(SILENCE * 1e3)
 
 
 class RigFault(Exception):
@@ -385,32 +470,87 @@ def rig_columns(log_path: Path, Lp: float) -> dict[str, np.ndarray]:
     }
 
 
-def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: dict[str, Any], round_trips: list[float]) -> tuple[dict, dict]:
-    """run.mat, run.csv, metrics.json and timing.json from the streamed log."""
-    from pendulab.analysis.metrics import compute_metrics
-    from pendulab.analysis.results import atomic_write, write_results
+#: After the hand lets go, the controller's catch is not a poke: the poke is looked for from this long after.
+RELEASE_SETTLE = 0.2
+#: The verdict of a session that ended before its poke (the one verdict in pendulab.analysis maps it).
+CUT_BEFORE_POKE = "cut before the poke"
 
-    columns = rig_columns(session.log_path, Lp)
+
+def hand_release_time(columns: dict[str, np.ndarray]) -> float | None:
+    """When the hand let go of the pendulum: the first sample at which the controller runs and the motor acts.
+
+    The person holds the raised pendulum until the controller has it, which is when the rig first
+    applies a voltage in the running state (the emulator releases it then too).
+    """
+    acting = np.flatnonzero((columns["supervisor_state"] == RUNNING) & (np.abs(columns["voltage"]) > 0))
+    return float(columns["t"][acting[0]]) if acting.size else None
+
+
+def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: str, ended_early: bool) -> dict[str, Any]:
+    """The metrics of a rig session from its columns (:func:`rig_columns`).
+
+    The response is read from the poke, found after the hand let go (:func:`hand_release_time`) and
+    before any cut: the supervisor's trip, or the end of a session that ended by itself
+    (``ended_early``: the rig's watchdog, a fault, a lost link, a signal). A session cut before its
+    poke has no response: every metric is None, with ``not_reported`` saying why and the verdict
+    :data:`CUT_BEFORE_POKE`.
+
+    Examples
+    --------
+    >>> t = np.arange(0, 0.92, 0.001)
+    >>> cols = {"t": t, "alpha": 0.01 * np.sin(20 * t), "xdot": 0 * t, "voltage": 1 + 0 * t,
+    ...         "supervisor_state": np.full(t.size, float(RUNNING))}
+    >>> m = lab_metrics(cols, q_alpha=0.0015, end_reason="the rig's watchdog tripped", ended_early=True)
+    >>> m["verdict"], m["stable"], m["overshoot_percent"], m["safety_cut_time_s"]
+    ('cut before the poke', None, None, 0.919)
+    """
+    from pendulab.analysis.compare import detect_poke
+    from pendulab.analysis.metrics import METRIC_KEYS, compute_metrics
+
     t = columns["t"]
-    running = np.flatnonzero(columns["supervisor_state"] == RUNNING)
-    cut = None
+    cut = cut_reason = None
     tripped = np.flatnonzero(columns["supervisor_state"] == TRIPPED)
     if tripped.size:
-        cut = float(t[tripped[0]])
-    # The poke is looked for while the controller holds the pendulum (after the capture, before a cut).
-    from pendulab.analysis.compare import detect_poke
-
-    poke = detect_poke(t, columns["alpha"], q_alpha=q_alpha, after=float(t[running[0]]) + 0.1, before=cut) if running.size else None
+        cut, cut_reason = float(t[tripped[0]]), "the supervisor tripped"
+    elif ended_early and t.size:
+        cut, cut_reason = float(t[-1]), end_reason
+    release = hand_release_time(columns) if t.size else None
+    poke = None
+    if release is not None:
+        poke = detect_poke(t, columns["alpha"], q_alpha=q_alpha, after=release + RELEASE_SETTLE, before=cut)
+    last = cut if cut is not None else (float(t[-1]) if t.size else 0.0)
     metrics: dict[str, Any]
-    if poke is not None and t.size > 10 and poke < t[-1] - 0.05:
+    if poke is not None and t.size > 10 and poke < last - 0.05:
         try:
             metrics = compute_metrics(t, columns["alpha"], poke_start=poke, q_alpha=q_alpha, xdot=columns["xdot"], safety_cut_time=cut)
         except Exception as exc:  # noqa: BLE001 - a log too short or odd for metrics still gets its files
             metrics = {"error": f"metrics could not be computed: {exc}"}
+    elif cut is not None:
+        metrics = {key: None for key in METRIC_KEYS}
+        metrics["safety_cut_time_s"] = cut
+        metrics["not_reported"] = f"{CUT_BEFORE_POKE} ({cut_reason} at t = {cut:.3f} s): there is no response to measure"
+        metrics["verdict"] = CUT_BEFORE_POKE
+        poke = None
     else:
-        metrics = {"error": "no poke found in the measured angle while the controller was engaged"}
+        metrics = {key: None for key in METRIC_KEYS}
+        metrics["error"] = ("no poke found in the measured angle while the controller held the pendulum"
+                            + ("" if release is not None else " (the motor never acted with the controller running)"))
+    if cut is not None:
+        metrics["safety_cut_reason"] = cut_reason
+    metrics["hand_release_s"] = release
     metrics["poke_start_detected_s"] = poke
-    metrics["end_reason"] = session.reason
+    metrics["end_reason"] = end_reason
+    return metrics
+
+
+def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: dict[str, Any], round_trips: list[float]) -> tuple[dict, dict]:
+    """run.mat, run.csv, metrics.json and timing.json from the streamed log."""
+    from pendulab.analysis.results import write_results
+    from pendulab.outputs import atomic_write
+
+    columns = rig_columns(session.log_path, Lp)
+    t = columns["t"]
+    metrics = lab_metrics(columns, q_alpha=q_alpha, end_reason=session.reason, ended_early=session.status != 0)
     meta = {**meta, "end_reason": session.reason, "source": "rig", "delay": session.link.delay}
     if meta.get("recentre") or meta.get("swing_up"):
         from pendulab.analysis.modes import mode_events, mode_metrics
@@ -425,4 +565,3 @@ def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: d
     timing["host_scheduling"] = session.priority
     atomic_write(session.out_dir / "timing.json", lambda f: f.write(json.dumps(timing, indent=2).encode()))
     return metrics, timing
-
