@@ -19,12 +19,11 @@ STAMP = re.compile(r"\[rig\s+([0-9.]+) s\]")
 def balanced_run():
     """10 s of the demo controller holding the long pendulum through a large poke (simulation: the encoders'
     quantized counts and the applied voltage, as the rig reports them)."""
+    import pendulab
     from pendulab.control import demo_controller
-    from pendulab.cosim.pendulum import simulate_poke
-    from pendulab.model.parameters import PlantParameters
 
-    params = PlantParameters.preset("long").with_values(poke_magnitude=220.0, poke_duration=0.005, poke_start=1.0)
-    return simulate_poke(demo_controller("long"), params, stop_time=10.0, delay=1).columns
+    spec = pendulab.RunSpec(demo_controller("long"), poke=pendulab.Poke(220.0, 0.005, 1.0), timing=pendulab.Timing(stop_time=10.0, delay=1))
+    return pendulab.simulate(spec).columns
 
 
 def _watch(columns, *, freeze: str | None = None, at: float = 0.0) -> tuple[float | None, str | None]:

@@ -96,6 +96,7 @@ class EndingSignals:
     Examples
     --------
     >>> import os, signal
+    >>> # skipped: doctest lets a KeyboardInterrupt (Terminated is one) stop the whole test run
     >>> with EndingSignals() as ending:                                     # doctest: +SKIP
     ...     os.kill(os.getpid(), signal.SIGTERM)
     Traceback (most recent call last):
