@@ -78,7 +78,9 @@ def test_without_nonlinearities() -> None:
     [
         ({"Mp": -0.1}, ["Mp", "negative"]),
         ({"M_cart": -0.57}, ["M_cart"]),
-        ({"M_cart": 0.0}, ["M_cart", "> 0"]),
+        ({"M_cart": 0.0}, ["M_cart", "outside its range 0.01 to 100 kg"]),
+        ({"V_max": -5.0}, ["V_max", "negative", "0.01 to 1000 V"]),
+        ({"Lp": 0.0}, ["lp <= Lp"]),
         ({"Rm": 0.0}, ["Rm"]),
         ({"Beq": math.nan}, ["Beq", "not finite"]),
         ({"g": math.inf}, ["g", "not finite"]),

@@ -163,11 +163,14 @@ class Component:
     def setup(self, start_time: float, values: Mapping[str, Any] | None = None, *, stop_time: float | None = None) -> None:
         """Set the start values (with ``values`` on top) and initialize at ``start_time``."""
         self.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
-        for variable, value in {**self.start_values, **(values or {})}.items():
-            self.set_value(variable, value)
         try:
+            # A start value outside its variable's range is refused here, with the FMU's log line naming it.
+            for variable, value in {**self.start_values, **(values or {})}.items():
+                self.set_value(variable, value)
             self.fmu.enterInitializationMode()
             self.fmu.exitInitializationMode()
+        except UserError:
+            raise
         except Exception as exc:  # fmpy raises FMICallException with the status only
             raise SimulationError(f"{self.name}: initialization failed ({exc}); check its start values") from exc
 

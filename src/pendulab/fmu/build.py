@@ -27,7 +27,7 @@ from typing import Callable, Iterable
 import fmpy
 
 from pendulab.errors import FmuBuildError
-from pendulab.fmu.description import ModelSpec, model_description_xml, variables_header
+from pendulab.fmu.description import ModelSpec, documentation_html, model_description_xml, variables_header
 from pendulab.fmu.models import ALL_FMUS, FMI3_MODELS, MODELS
 from pendulab.native import PREBUILT_DIR, WIN64_COMPILER, cache_dir, compile_shared, compiler_needed, find_compiler, library_suffix
 
@@ -142,6 +142,8 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
         (sources_dir / "variables.h").write_text(variables_header(spec))
         c_files = [wrapper, COMMON_SOURCE, *spec.sources]
         (root / "modelDescription.xml").write_text(model_description_xml(spec, c_files))
+        (root / "documentation").mkdir()
+        (root / "documentation" / "index.html").write_text(documentation_html(spec), encoding="utf-8")
         (sources_dir / "buildDescription.xml").write_text(_build_description(spec.identifier, c_files))
 
         binaries = root / "binaries"

@@ -26,11 +26,45 @@ PENDULUMS = ("long", "short", "none")
 CARTS = ("ip02", "ip02-weight", "ip01")
 
 
-def _p(value: float, unit: str, description: str, *, minimum: float = 0.0, positive: bool = False) -> Any:
-    return field(
-        default=value,
-        metadata={"unit": unit, "description": description, "min": minimum, "positive": positive},
-    )
+def _p(value: float, unit: str, description: str, minimum: float = 0.0, maximum: float = math.inf, *,
+       positive: bool = False) -> Any:
+    """A parameter field: default, unit, description and its range ``minimum <= value <= maximum``
+    (``positive``: also ``value > 0``). The range is the plant FMU's ``min``/``max`` too, which the FMU
+    checks when the value is set."""
+    return field(default=value, metadata={"unit": unit, "description": description, "min": minimum, "max": maximum,
+                                          "positive": positive})
+
+
+def range_text(minimum: float, maximum: float, unit: str) -> str:
+    """``"0.01 to 100 kg"``: a range as the error messages (Python and the FMUs' C) word it."""
+    unit = "" if unit in ("", "1") else f" {unit}"
+    return f"{minimum:g} to {maximum:g}{unit}"
+
+
+def check_ranges(values: Any, owner: str = "parameter") -> None:
+    """Raise :class:`ParameterError` (one line: name, value, allowed range) for the first field of the
+    dataclass ``values`` that is not a finite number within its ``_p`` range."""
+    for f in fields(values):
+        value, unit = getattr(values, f.name), f.metadata["unit"]
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ParameterError(f"{owner} {f.name}={value!r} is not a number; give a real value in {unit}")
+        if not math.isfinite(value):
+            raise ParameterError(f"{owner} {f.name}={value} is not finite; give a finite value in {unit}")
+        low, high = f.metadata["min"], f.metadata["max"]
+        if not low <= value <= high:
+            negative = " (negative)" if value < 0 <= low else ""
+            raise ParameterError(f"{owner} {f.name}={value}{negative} is outside its range {range_text(low, high, unit)}")
+        if f.metadata["positive"] and value <= 0:
+            raise ParameterError(f"{owner} {f.name}={value} must be > 0 {unit}")
+
+
+#: Conditions between parameters, in the one syntax that Python and C both read (comparisons, ``+ - * /``,
+#: ``or``/``and``), with the reason shown when one fails. The plant FMU checks the same text on leaving
+#: initialization (generated into its C by :func:`pendulab.fmu.description.constraints_c`).
+CONSTRAINTS: tuple[tuple[str, str], ...] = (
+    ("lp <= Lp", "the centre of gravity lies between the pivot and the tip: set lp <= Lp"),
+    ("Mp == 0 or Ip + Mp * lp * lp > 0", "the pendulum has mass but no inertia: set lp > 0 or Ip > 0"),
+)
 
 
 @dataclass(frozen=True)
@@ -42,58 +76,50 @@ class PlantParameters:
     """
 
     # pendulum (defaults: long, 24 in)
-    Mp: float = _p(0.230, "kg", "Pendulum mass")
-    Lp: float = _p(0.6413, "m", "Pendulum length, pivot to tip")
-    lp: float = _p(0.3302, "m", "Pivot to pendulum centre of gravity")
-    Ip: float = _p(0.230 * 0.6413**2 / 12, "kg.m2", "Pendulum inertia about its centre of gravity")
-    Bp: float = _p(0.0024, "N.m.s/rad", "Viscous damping at the pendulum pivot")
+    Mp: float = _p(0.230, "kg", "Pendulum mass", 0, 10)
+    Lp: float = _p(0.6413, "m", "Pendulum length, pivot to tip", 0, 5)
+    lp: float = _p(0.3302, "m", "Pivot to pendulum centre of gravity", 0, 5)
+    Ip: float = _p(0.230 * 0.6413**2 / 12, "kg.m2", "Pendulum inertia about its centre of gravity", 0, 10)
+    Bp: float = _p(0.0024, "N.m.s/rad", "Viscous damping at the pendulum pivot", 0, 10)
     # cart and motor (defaults: IP02, no load)
-    M_cart: float = _p(0.57, "kg", "Cart mass without the motor's rotor inertia", positive=True)
-    Beq: float = _p(4.3, "N.s/m", "Equivalent viscous damping of the cart")
-    Rm: float = _p(2.6, "Ohm", "Motor armature resistance", positive=True)
-    Kt: float = _p(0.007683, "N.m/A", "Motor torque constant", positive=True)
-    Km: float = _p(0.007678, "V.s/rad", "Motor back-EMF constant")
-    Kg: float = _p(3.71, "1", "Planetary gearbox ratio", positive=True)
-    eta_g: float = _p(1.0, "1", "Gearbox efficiency", positive=True)
-    eta_m: float = _p(1.0, "1", "Motor efficiency", positive=True)
-    Jm: float = _p(3.90e-7, "kg.m2", "Rotor moment of inertia")
-    r_mp: float = _p(6.35e-3, "m", "Motor pinion radius", positive=True)
-    force_gain: float = _p(1.0, "1", "Calibration factor on the motor force", positive=True)
-    g: float = _p(9.81, "m/s2", "Gravitational acceleration")
+    M_cart: float = _p(0.57, "kg", "Cart mass without the motor's rotor inertia", 0.01, 100)
+    Beq: float = _p(4.3, "N.s/m", "Equivalent viscous damping of the cart", 0, 1e4)
+    Rm: float = _p(2.6, "Ohm", "Motor armature resistance", 0.01, 1000)
+    Kt: float = _p(0.007683, "N.m/A", "Motor torque constant", 1e-5, 10)
+    Km: float = _p(0.007678, "V.s/rad", "Motor back-EMF constant", 0, 10)
+    Kg: float = _p(3.71, "1", "Planetary gearbox ratio", 0.01, 1000)
+    eta_g: float = _p(1.0, "1", "Gearbox efficiency", 0.01, 1)
+    eta_m: float = _p(1.0, "1", "Motor efficiency", 0.01, 1)
+    Jm: float = _p(3.90e-7, "kg.m2", "Rotor moment of inertia", 0, 1)
+    r_mp: float = _p(6.35e-3, "m", "Motor pinion radius", 1e-4, 1)
+    force_gain: float = _p(1.0, "1", "Calibration factor on the motor force", 0.01, 100)
+    g: float = _p(9.81, "m/s2", "Gravitational acceleration", 0, 100)
     # amplifier
-    V_max: float = _p(10.0, "V", "Amplifier voltage saturation", positive=True)
-    I_max: float = _p(0.0, "A", "Amplifier current limit (0 = no limit)")
+    V_max: float = _p(10.0, "V", "Amplifier voltage saturation", 0.01, 1000)
+    I_max: float = _p(0.0, "A", "Amplifier current limit (0 = no limit)", 0, 1000)
     # stick-slip friction vector [F1, v1, F2, v2, B]
-    F1: float = _p(1.5, "N", "Stiction: the cart sticks below this motor force")
-    v1: float = _p(0.005, "m/s", "Stiction: the cart can stick below this speed")
-    F2: float = _p(3.0, "N", "Slip: strong viscous drag below this motor force")
-    v2: float = _p(0.05, "m/s", "Slip: strong viscous drag below this speed")
-    B: float = _p(20.0, "kg/s", "Slip: viscous drag coefficient")
+    F1: float = _p(1.5, "N", "Stiction: the cart sticks below this motor force", 0, 1000)
+    v1: float = _p(0.005, "m/s", "Stiction: the cart can stick below this speed", 0, 10)
+    F2: float = _p(3.0, "N", "Slip: strong viscous drag below this motor force", 0, 1000)
+    v2: float = _p(0.05, "m/s", "Slip: strong viscous drag below this speed", 0, 10)
+    B: float = _p(20.0, "kg/s", "Slip: viscous drag coefficient", 0, 1e4)
     # encoders
-    q_alpha: float = _p(0.001, "rad", "Angle encoder step (0 = no quantization)")
-    q_x: float = _p(22.75e-6, "m", "Cart encoder step (0 = no quantization)")
+    q_alpha: float = _p(0.001, "rad", "Angle encoder step (0 = no quantization)", 0, 1)
+    q_x: float = _p(22.75e-6, "m", "Cart encoder step (0 = no quantization)", 0, 1)
     # poke: a rectangular pulse added to the angular acceleration
-    poke_magnitude: float = _p(50.0, "rad/s2", "Poke magnitude", minimum=-math.inf)
-    poke_duration: float = _p(0.005, "s", "Poke duration")
-    poke_start: float = _p(1.0, "s", "Poke start time")
+    poke_magnitude: float = _p(50.0, "rad/s2", "Poke magnitude", -1e5, 1e5)
+    poke_duration: float = _p(0.005, "s", "Poke duration", 0, 1e3)
+    poke_start: float = _p(1.0, "s", "Poke start time", 0, 1e6)
     # track: the cart stops dead at the end stops (appended last: earlier value references stay stable)
     track_half_length: float = _p(
-        0.407, "m", "End stops: the cart stops dead at +/- this position (IP02: 0.814 m cart travel)", positive=True
+        0.407, "m", "End stops: the cart stops dead at +/- this position (IP02: 0.814 m cart travel); 1e4: no stops within reach", 0.01, 1e6
     )
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool):
-                raise ParameterError(f"parameter {f.name}={value!r} is not a number; give a real value in {f.metadata['unit']}")
-            if not math.isfinite(value):
-                raise ParameterError(f"parameter {f.name}={value} is not finite; give a finite value in {f.metadata['unit']}")
-            if value < f.metadata["min"]:
-                raise ParameterError(f"parameter {f.name}={value} is negative; it must be >= 0 {f.metadata['unit']}")
-            if f.metadata["positive"] and value <= 0:
-                raise ParameterError(f"parameter {f.name}={value} must be > 0 {f.metadata['unit']}")
-        if self.Mp > 0 and self.Ip + self.Mp * self.lp**2 <= 0:
-            raise ParameterError("the pendulum has mass but no inertia: set lp > 0 or Ip > 0")
+        check_ranges(self)
+        for condition, why in CONSTRAINTS:
+            if not eval(condition, {"__builtins__": {}}, self.as_dict()):  # noqa: S307 - our own table's text
+                raise ParameterError(f"parameters violate {condition}: {why}")
 
     # ------------------------------------------------------------------ construction
     @classmethod

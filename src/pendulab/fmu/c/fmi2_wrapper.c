@@ -92,6 +92,7 @@ fmi2Status fmi2Reset(fmi2Component c) { return STATUS(fmu_reset(COMP, "fmi2Reset
         for (k = 0; k < nvr; k++) {                                                                       \
             long index = fmu_index(COMP, #Name, Array, vr[k], 0, 1);                                      \
             if (index < 0) return fmi2Error;                                                              \
+            if (fmu_check_value(COMP, #Name, Array, index, (double)value[k]) != OK) return fmi2Error;     \
             COMP->array[index] = value[k];                                                                \
         }                                                                                                 \
         return fmi2OK;                                                                                    \

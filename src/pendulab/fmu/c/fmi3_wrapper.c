@@ -158,6 +158,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
         for (k = 0; k < nvr; k++) {                                                                       \
             long index = fmu_index(COMP, #Name, Array, vr[k], first, 1);                                  \
             if (index < 0) return fmi3Error;                                                              \
+            if (fmu_check_value(COMP, #Name, Array, index, (double)values[k]) != OK) return fmi3Error;    \
             COMP->array[index] = convert(values[k]);                                                      \
         }                                                                                                 \
         return fmi3OK;                                                                                    \

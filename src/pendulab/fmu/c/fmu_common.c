@@ -101,7 +101,13 @@ Status fmu_enter_initialization_mode(Instance *comp, const char *function) {
 
 Status fmu_exit_initialization_mode(Instance *comp, const char *function) {
     Status status;
+    char message[512];
     CHECK(function, MODE_BIT(MODE_INITIALIZATION));
+    /* The conditions between variables (each variable's own range was checked when it was set). */
+    if (!check_constraints(comp->r, comp->i, comp->b, message, sizeof(message))) {
+        fmu_log(comp, Error, "logStatusError", "%s: %s", function, message);
+        return Error;
+    }
     status = model_initialize(comp);
     if (status > Warning) return status;
     comp->outputs_stale = 1;
@@ -197,6 +203,16 @@ long fmu_index(Instance *comp, const char *function, VariableArray array, unsign
         return -1;
     }
     return (long)index;
+}
+
+Status fmu_check_value(Instance *comp, const char *function, VariableArray array, long index, double value) {
+    static const VariableInfo *const info[] = {REAL_INFO, INTEGER_INFO, BOOLEAN_INFO};
+    const VariableInfo *v = &info[array][index];
+    /* Written so that NaN fails too; a variable without a range (words NULL) takes any value. */
+    if (!v->words || (value >= v->min && value <= v->max)) return OK;
+    fmu_log(comp, Error, "logStatusError", "%s: %s = %g is outside its range %s; the value was not set", function,
+            v->name, value, v->words);
+    return Error;
 }
 
 Status fmu_no_variables(Instance *comp, const char *function, size_t nvr) {

@@ -57,6 +57,9 @@ Status fmu_begin_set(Instance *comp, const char *function, const void *vr, size_
 /* The index in comp's array of the variable whose value reference is vr (numbered from first in that
  * array), or -1 (logged) if there is none, or if it is set (to_set) as a fixed parameter after initialization. */
 long fmu_index(Instance *comp, const char *function, VariableArray array, unsigned vr, unsigned first, int to_set);
+/* Whether value lies within the range (min/max) of the variable at index of array; logs the refusal naming the
+ * variable, the value and the range. A setter calls it before it stores the value. */
+Status fmu_check_value(Instance *comp, const char *function, VariableArray array, long index, double value);
 /* Getters and setters of types the model has no variables of: an empty call is fine, anything else an error. */
 Status fmu_no_variables(Instance *comp, const char *function, size_t nvr);
 Status fmu_not_supported(Instance *comp, const char *what);

@@ -18,27 +18,9 @@ size_t model_work_size(void) { return sizeof(Work); }
 
 void model_reset(Instance *comp) { (void)comp; /* fmu_common.c zeroes the work memory */ }
 
+/* Every parameter's range (n, h, Lp, integral_index, integral_limit; the matrices' entries finite) is checked by
+ * fmu_common.c when it is set, integral_index <= n on leaving initialization (config.py's CONSTRAINTS). */
 Status model_initialize(Instance *comp) {
-    int n = comp->i[VR_n], k;
-    if (n < 0 || n > MAX_ORDER) {
-        fmu_log(comp, Error, "logStatusError", "controller order n=%d must be within 0..%d", n, MAX_ORDER);
-        return Error;
-    }
-    if (comp->i[VR_integral_index] < 0 || comp->i[VR_integral_index] > n || !(comp->r[VR_integral_limit] >= 0)) {
-        fmu_log(comp, Error, "logStatusError", "integral_index=%d must be within 0..n=%d and integral_limit=%g >= 0",
-                comp->i[VR_integral_index], n, comp->r[VR_integral_limit]);
-        return Error;
-    }
-    if (!(comp->r[VR_h] > 0)) {
-        fmu_log(comp, Error, "logStatusError", "sample period h=%g must be positive", comp->r[VR_h]);
-        return Error;
-    }
-    for (k = VR_Lp; k < N_REALS; k++) {
-        if (!isfinite(comp->r[k])) {
-            fmu_log(comp, Error, "logStatusError", "controller parameter with value reference %d is not finite", k);
-            return Error;
-        }
-    }
     memset(((Work *)comp->work)->x, 0, sizeof(((Work *)comp->work)->x));
     return OK;
 }

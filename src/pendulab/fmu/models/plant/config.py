@@ -5,9 +5,13 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+import casadi as ca
+
 from pendulab.fmu.description import ModelSpec, Variable
-from pendulab.model.parameters import PlantParameters
-from pendulab.model.plant import EVENT_INDICATORS, MAX_SUBSTEP, REGIME, STATES, PlantModel
+from pendulab.fmu.models.plant.documentation import documentation
+from pendulab.fmu.structure import dependencies
+from pendulab.model.parameters import CONSTRAINTS, PlantParameters
+from pendulab.model.plant import EVENT_INDICATORS, MAX_SUBSTEP, OUTPUTS, REGIME, STATES, PlantModel
 
 _STATE_TEXT = {
     "x": ("m", "Cart position (positive to the right, 0 at track centre)"),
@@ -18,9 +22,48 @@ _STATE_TEXT = {
 _DERIVATIVE_UNIT = {"x": "m/s", "xdot": "m/s2", "alpha": "rad/s", "alphadot": "rad/s2"}
 
 
+#: The cart never leaves the longest track the parameter table allows (its end stops hold it).
+_TRACK_MAX = PlantParameters.__dataclass_fields__["track_half_length"].metadata["max"]
+_STATE_RANGE = {"x": (-_TRACK_MAX, _TRACK_MAX)}
+
+
+def _merge(*tables: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
+    """The union of dependency tables; a known whose kind differs between them is ``dependent``."""
+    merged: dict[str, dict[str, str]] = {}
+    for table in tables:
+        for unknown, row in table.items():
+            into = merged.setdefault(unknown, {})
+            for known, kind in row.items():
+                into[known] = kind if into.get(known, kind) == kind else "dependent"
+    return merged
+
+
+def model_structure() -> tuple[dict[str, dict[str, str]], dict[str, dict[str, str]]]:
+    """The plant's dependencies (at communication points / in continuous time, and at initialization) from the
+    CasADi model's Jacobian structure: the outputs from ``plant_outputs``, the derivatives from both the
+    Co-Simulation law (``plant_ode``, switches decided from the state) and Model Exchange's (``plant_ode_regime``,
+    switches frozen between events)."""
+    model = PlantModel()
+    state, V, pvec, t, _ = model._symbols()
+    regime = ca.SX.sym("regime", len(REGIME))
+    measured = model.outputs(state, V, pvec, t)
+    laws = (model.ode(state, V, pvec, t), model.ode_regime(state, V, pvec, t, regime))
+    knowns = {**{s: state[k] for k, s in enumerate(STATES)}, "V": V}
+    parameters = {name: pvec[k] for k, name in enumerate(PlantParameters.names())}
+    outputs = {**knowns, **{name: measured[k] for k, name in enumerate(OUTPUTS)}}
+    del outputs["V"]
+    tables, initial = [], []
+    for law in laws:
+        derivatives = {f"der({s})": law[k] for k, s in enumerate(STATES)}
+        tables.append(dependencies({**outputs, **derivatives}, knowns, parameters=list(parameters.values()), smooth=False))
+        initial.append(dependencies({**{n: outputs[n] for n in OUTPUTS}, **derivatives}, {**knowns, **parameters}, smooth=False))
+    return _merge(*tables), _merge(*initial)
+
+
 def spec() -> ModelSpec:
     states = [
-        Variable(s, "Real", "output", start=0.0, initial="exact", unit=_STATE_TEXT[s][0], description=_STATE_TEXT[s][1])
+        Variable(s, "Real", "output", start=0.0, initial="exact", unit=_STATE_TEXT[s][0], description=_STATE_TEXT[s][1],
+                 min=_STATE_RANGE.get(s, (None, None))[0], max=_STATE_RANGE.get(s, (None, None))[1])
         for s in STATES
     ]
     derivatives = [
@@ -35,10 +78,13 @@ def spec() -> ModelSpec:
         Variable("V_applied", "Real", "output", unit="V", description="Voltage after the amplifier saturation"),
         Variable("F_friction", "Real", "output", unit="N", description="Stick-slip friction force on the cart"),
     ]
+    ranges = {f.name: (f.metadata["min"], f.metadata["max"]) for f in PlantParameters.__dataclass_fields__.values()}
     parameters = [
-        Variable(name, "Real", "parameter", start=float(default), unit=unit, description=text, initial="exact")
+        Variable(name, "Real", "parameter", start=float(default), unit=unit, description=text, initial="exact",
+                 min=float(ranges[name][0]), max=float(ranges[name][1]))
         for name, default, unit, text in PlantParameters.describe()
     ]
+    structure, initial_structure = model_structure()
     # The generated equations; any change to the model changes the text and so the GUID.
     with tempfile.TemporaryDirectory() as tmp:
         model = PlantModel()
@@ -57,6 +103,11 @@ def spec() -> ModelSpec:
         event_indicators=len(EVENT_INDICATORS),
         event_indicator_names=EVENT_INDICATORS,
         generated=generated,
+        dependencies=structure,
+        initial_dependencies=initial_structure,
+        # The start state lies inside the track (each variable's own range is checked when it is set).
+        constraints=(*CONSTRAINTS, ("abs(x) <= track_half_length", "the cart starts between the end stops")),
+        documentation=documentation(),
         defines={
             "VR_FIRST_PARAMETER": f"VR_{names[0]}",
             "N_PARAMETERS": str(len(names)),
@@ -64,6 +115,5 @@ def spec() -> ModelSpec:
             "N_REGIME": str(len(REGIME)),
             "PLANT_WORK_DOUBLES": str(max(1, work_doubles)),
             "PLANT_WORK_INTS": str(max(1, work_ints)),
-            "PARAMETER_NAMES": "((const char *[]){" + ", ".join(f'"{n}"' for n in names) + "})",
         },
     )

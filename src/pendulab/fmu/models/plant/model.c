@@ -33,28 +33,12 @@ size_t model_work_size(void) { return sizeof(Work); }
 
 void model_reset(Instance *comp) { (void)comp; }
 
+/* Every parameter's range and the conditions between them (lp <= Lp, the start inside the track, ...) are checked
+ * by fmu_common.c from the variable table: here only the discrete state is set up. */
 Status model_initialize(Instance *comp) {
-    int k;
-    const double *p = PARAMS(comp);
-    for (k = 0; k < N_PARAMETERS; k++) {
-        if (!isfinite(p[k])) {
-            fmu_log(comp, Error, "logStatusError", "parameter %s is not finite", PARAMETER_NAMES[k]);
-            return Error;
-        }
-    }
-    if (comp->r[VR_Rm] <= 0 || comp->r[VR_r_mp] <= 0 || comp->r[VR_Kg] <= 0 || comp->r[VR_M_cart] <= 0 || comp->r[VR_Mp] < 0) {
-        fmu_log(comp, Error, "logStatusError", "Rm, r_mp, Kg and M_cart must be > 0 and Mp >= 0");
-        return Error;
-    }
-    if (comp->r[VR_track_half_length] <= 0) {
-        fmu_log(comp, Error, "logStatusError", "track_half_length=%g must be > 0", comp->r[VR_track_half_length]);
-        return Error;
-    }
-    {
-        int changed;
-        memset(((Work *)comp->work)->regime, 0, sizeof(((Work *)comp->work)->regime));
-        return model_event_update(comp, &changed);
-    }
+    int changed;
+    memset(((Work *)comp->work)->regime, 0, sizeof(((Work *)comp->work)->regime));
+    return model_event_update(comp, &changed);
 }
 
 Status model_event_update(Instance *comp, int *states_changed) {

@@ -131,14 +131,16 @@ def spec() -> ModelSpec:
         Variable("alpha", "Real", "output", unit="rad",
                  description="Pendulum angle from upright in (-pi, pi], as the supervisor checks it"),
         Variable("alpha_max", "Real", "parameter", start=ALPHA_MAX_DEFAULT, unit="rad", initial="exact",
+                 min=math.radians(lo) - ALPHA_MAX_SLACK, max=math.radians(hi) + ALPHA_MAX_SLACK,
                  description=f"Angle limit |alpha| (must be {lo:g} to {hi:g} deg; not checked in calibration_mode)"),
-        Variable("x_max", "Real", "parameter", start=X_MAX_DEFAULT, unit="m", initial="exact",
+        Variable("x_max", "Real", "parameter", start=X_MAX_DEFAULT, unit="m", initial="exact", min=1e-3, max=10.0,
                  description="Track limit |x_measured|"),
         Variable("capture_window", "Real", "parameter", start=CAPTURE_WINDOW_DEFAULT, unit="rad", initial="exact",
+                 min=1e-6, max=math.radians(hi) + ALPHA_MAX_SLACK,
                  description="rig_mode: the controller is engaged once |alpha| is below this (0 < capture_window <= alpha_max)"),
         Variable("centre_tolerance", "Real", "parameter", start=CENTRE_TOLERANCE_DEFAULT, unit="m", initial="exact",
-                 description="calibration_mode: start is accepted only while |x_measured| is below this"),
-        Variable("V_limit", "Real", "parameter", start=V_LIMIT_DEFAULT, unit="V", initial="exact",
+                 min=1e-6, max=10.0, description="calibration_mode: start is accepted only while |x_measured| is below this"),
+        Variable("V_limit", "Real", "parameter", start=V_LIMIT_DEFAULT, unit="V", initial="exact", min=0.01, max=1000.0,
                  description="Clamp of the gated voltage V"),
         # Integer
         Variable("command", "Integer", "input", start=0,
@@ -164,11 +166,9 @@ def spec() -> ModelSpec:
         "N_STATE_CODES": str(len(STATES)),
         "STATE_NAMES": _c_names(STATES),
         "TRIP_NAMES": _c_names(TRIP_REASONS),
-        "ALPHA_MAX_MIN_DEG": repr(lo),
-        "ALPHA_MAX_MAX_DEG": repr(hi),
-        "ALPHA_MAX_SLACK": repr(ALPHA_MAX_SLACK),
     }
     variables += _mode_variables()
+    structure, initial_structure = model_structure(variables)
     return ModelSpec(
         identifier="Supervisor",
         description="Lab supervisor: angle and track limits with latched trips, start / pause / end / re-arm, "
@@ -176,14 +176,32 @@ def spec() -> ModelSpec:
         "swing-up with a catch window; gates the voltage and owns the motor enable",
         variables=variables,
         defines=defines,
+        dependencies=structure,
+        initial_dependencies=initial_structure,
+        constraints=CONSTRAINTS,
+        documentation=documentation(),
     )
+
+
+#: Ranges of the re-centring and swing-up parameters (the FMU refuses a value set outside them).
+MODE_RANGES: dict[str, tuple[float, float]] = {
+    "recentre_x_on": (0.0, 10.0), "recentre_x_off": (0.0, 10.0), "recentre_gain": (-100.0, 100.0),
+    "recentre_r_max": (0.0, 1.0), "recentre_slew": (1e-6, 10.0), "pendulum_frequency": (1e-3, 1e3),
+    "swing_energy_gain": (0.0, 1e4), "swing_energy_target": (-2.0, 2.0), "swing_accel_max": (0.0, 100.0),
+    "swing_speed_max": (1e-6, 10.0), "swing_travel": (1e-6, 10.0), "swing_centring": (0.0, 100.0),
+    "swing_kp": (0.0, 1e4), "swing_kd": (0.0, 1e3), "swing_kff": (0.0, 1e3), "swing_V_limit": (1e-3, 1e3),
+    "swing_x_limit": (1e-3, 10.0), "swing_time_max": (1e-3, 1e6), "catch_x": (1e-6, 10.0),
+    "catch_alpha": (1e-6, math.pi), "catch_rate": (1e-6, 1e3), "catch_hold": (0.0, 1e3), "rate_filter": (0.0, 10.0),
+}
 
 
 def _mode_variables() -> list[Variable]:
     """Re-centring and swing-up (SPEC §5): their outputs and parameters."""
 
     def real(name: str, start: float, unit: str, description: str) -> Variable:
-        return Variable(name, "Real", "parameter", start=start, unit=unit, initial="exact", description=description)
+        low, high = MODE_RANGES[name]
+        return Variable(name, "Real", "parameter", start=start, unit=unit, initial="exact", description=description,
+                        min=low, max=high)
 
     return [
         Variable("r", "Real", "output", unit="m",
@@ -216,7 +234,7 @@ def _mode_variables() -> list[Variable]:
         real("catch_rate", CATCH_RATE, "rad/s", "Catch window: |dalpha/dt| below this"),
         real("catch_hold", 1.0, "s", "A fall past alpha_max within this time of a catch is a missed catch: swing again"),
         real("rate_filter", 0.01, "s", "Time constant of the speed estimates (filtered differences of the measurements)"),
-        Variable("swing_tries", "Integer", "parameter", start=3, initial="exact",
+        Variable("swing_tries", "Integer", "parameter", start=3, initial="exact", min=1, max=1000,
                  description="Missed catches after which the swing-up stops (trip: catch missed)"),
         Variable("misses", "Integer", "output", description="Missed catches so far"),
         Variable("recentre", "Boolean", "parameter", start=False, initial="exact",
@@ -227,3 +245,50 @@ def _mode_variables() -> list[Variable]:
         Variable("controller_engaged", "Boolean", "output",
                  description="The controller runs (false while swinging up: held in reset, engaged fresh at the catch)"),
     ]
+
+
+#: Conditions between the parameters, checked by the FMU on leaving initialization (their ranges when set).
+CONSTRAINTS = (
+    ("capture_window <= alpha_max", "the controller is engaged inside the angle limit: set capture_window <= alpha_max"),
+    ("centre_tolerance < x_max", "a centred cart is inside the track limit: set centre_tolerance < x_max"),
+    ("catch_alpha <= alpha_max", "the catch window lies inside the angle limit: set catch_alpha <= alpha_max"),
+    ("recentre_x_off < recentre_x_on", "re-centring lets go closer to the centre than it engages: set recentre_x_off < recentre_x_on"),
+    ("recentre_x_on < x_max", "re-centring engages inside the track limit: set recentre_x_on < x_max"),
+)
+#: Outputs that depend on fewer inputs than all (model.c: alpha is the measured angle, converted in rig_mode).
+FEEDTHROUGH = {"alpha": ("alpha_measured",)}
+#: Inputs that no output depends on (the iteration is only announced in the log).
+NO_FEEDTHROUGH = ("iteration",)
+
+
+def model_structure(variables: list[Variable]) -> tuple[dict[str, dict[str, str]], dict[str, dict[str, str]]]:
+    """The outputs' dependencies: the state machine (model.c) runs on the current inputs in every output
+    update, so every output but those of :data:`FEEDTHROUGH` may change with every input but those of
+    :data:`NO_FEEDTHROUGH` (a trip, a command). At initialization the parameters are knowns too."""
+    inputs = [v.name for v in variables if v.causality == "input" and v.name not in NO_FEEDTHROUGH]
+    parameters = [v.name for v in variables if v.causality == "parameter"]
+    structure = {v.name: {k: "dependent" for k in FEEDTHROUGH.get(v.name, inputs)}
+                 for v in variables if v.causality == "output"}
+    initial = {name: {**row, **{p: "dependent" for p in parameters}} for name, row in structure.items()}
+    return structure, initial
+
+
+def documentation() -> str:
+    """The supervisor's sections of documentation/index.html, from the code tables above."""
+    rows = "".join(f"<tr><td>{code}</td><td>{name}</td></tr>" for code, name in STATES.items())
+    trips = "".join(f"<tr><td>{code}</td><td>{name}</td></tr>" for code, name in TRIP_REASONS.items())
+    commands = "".join(f"<tr><td>{code}</td><td>{name}</td><td>{''.join(k for k, c in KEYS.items() if c == name)}</td></tr>"
+                       for name, code in COMMANDS.items())
+    return f"""
+<h2>State machine</h2>
+<pre>{__doc__.split("States (output ``state``)::")[1].split("Examples")[0].strip()}</pre>
+<h3>States (output <code>state</code>)</h3>
+<table><tr><th>code</th><th>state</th></tr>{rows}</table>
+<h3>Trip reasons (output <code>trip_reason</code>)</h3>
+<p>A trip latches: the voltage V is 0 and motor_enable false until a re-arm (or start) with every limit
+satisfied. <code>trip_time</code> is the communication point at which the trip was seen (-1: none).</p>
+<table><tr><th>code</th><th>reason</th></tr>{trips}</table>
+<h3>Commands (input <code>command</code>)</h3>
+<p>Acted on when the input changes to a non-zero code, so a held code acts once.</p>
+<table><tr><th>code</th><th>command</th><th>lab key</th></tr>{commands}</table>
+"""

@@ -389,51 +389,11 @@ void model_reset(Instance *comp) {
     m->misses = 0;
 }
 
+/* The parameters' ranges (alpha_max 10 to 15 deg, the swing-up's and re-centring's, ...) and the conditions
+ * between them (capture_window <= alpha_max, recentre_x_off < recentre_x_on < x_max, ...) are checked by
+ * fmu_common.c from the variable table (config.py). */
 Status model_initialize(Instance *comp) {
-    const double deg = M_PI / 180.0;
-    double alpha_max = comp->r[VR_alpha_max];
     Memory *m = MEMORY(comp);
-    if (!(alpha_max >= ALPHA_MAX_MIN_DEG * deg - ALPHA_MAX_SLACK && alpha_max <= ALPHA_MAX_MAX_DEG * deg + ALPHA_MAX_SLACK)) {
-        fmu_log(comp, Error, "logStatusError",
-                "alpha_max = %g rad (%g deg) is outside the allowed %g to %g deg; set alpha_max between %.4f and %.4f rad",
-                alpha_max, DEG(alpha_max), ALPHA_MAX_MIN_DEG, ALPHA_MAX_MAX_DEG, ALPHA_MAX_MIN_DEG * deg, ALPHA_MAX_MAX_DEG * deg);
-        return Error;
-    }
-    if (!(comp->r[VR_x_max] > 0 && isfinite(comp->r[VR_x_max]))) {
-        fmu_log(comp, Error, "logStatusError", "x_max = %g m must be positive and finite", comp->r[VR_x_max]);
-        return Error;
-    }
-    if (!(comp->r[VR_capture_window] > 0 && comp->r[VR_capture_window] <= alpha_max)) {
-        fmu_log(comp, Error, "logStatusError", "capture_window = %g rad must be > 0 and <= alpha_max = %g rad",
-                comp->r[VR_capture_window], alpha_max);
-        return Error;
-    }
-    if (!(comp->r[VR_centre_tolerance] > 0 && comp->r[VR_centre_tolerance] < comp->r[VR_x_max])) {
-        fmu_log(comp, Error, "logStatusError", "centre_tolerance = %g m must be > 0 and < x_max = %g m",
-                comp->r[VR_centre_tolerance], comp->r[VR_x_max]);
-        return Error;
-    }
-    if (!(comp->r[VR_V_limit] > 0 && isfinite(comp->r[VR_V_limit]))) {
-        fmu_log(comp, Error, "logStatusError", "V_limit = %g V must be positive and finite", comp->r[VR_V_limit]);
-        return Error;
-    }
-    if (!(comp->r[VR_rate_filter] >= 0 && comp->r[VR_pendulum_frequency] > 0 && comp->r[VR_swing_V_limit] > 0
-          && comp->r[VR_swing_x_limit] > 0 && comp->r[VR_swing_time_max] > 0 && comp->r[VR_catch_x] > 0 && comp->r[VR_catch_alpha] > 0
-          && comp->r[VR_catch_alpha] <= alpha_max && comp->r[VR_catch_rate] > 0 && comp->r[VR_catch_hold] >= 0
-          && comp->i[VR_swing_tries] >= 1 && comp->r[VR_swing_speed_max] > 0 && comp->r[VR_swing_travel] > 0)) {
-        fmu_log(comp, Error, "logStatusError",
-                "swing-up parameters out of range: rate_filter >= 0, pendulum_frequency, swing_V_limit, swing_x_limit, swing_time_max, "
-                "catch_x, catch_rate, swing_speed_max and swing_travel > 0, 0 < catch_alpha <= alpha_max, catch_hold >= 0, swing_tries >= 1");
-        return Error;
-    }
-    if (!(comp->r[VR_recentre_x_on] > comp->r[VR_recentre_x_off] && comp->r[VR_recentre_x_off] >= 0
-          && comp->r[VR_recentre_x_on] < comp->r[VR_x_max] && comp->r[VR_recentre_r_max] >= 0 && comp->r[VR_recentre_slew] > 0
-          && isfinite(comp->r[VR_recentre_gain]))) {
-        fmu_log(comp, Error, "logStatusError",
-                "re-centring parameters out of range: need 0 <= recentre_x_off < recentre_x_on = %g m < x_max = %g m, recentre_r_max >= 0, "
-                "recentre_slew > 0, a finite recentre_gain", comp->r[VR_recentre_x_on], comp->r[VR_x_max]);
-        return Error;
-    }
     if (comp->b[VR_auto_start]) {
         handle_command(comp, m, CMD_START, upright_angle(comp), comp->time, 1);
         supervise(comp, m, upright_angle(comp), comp->time, 1);
