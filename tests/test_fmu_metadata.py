@@ -37,8 +37,9 @@ SCHEMAS = Path(__import__("fmpy").__file__).parent / "schema"
 
 
 @pytest.fixture(scope="module")
-def fmus(plant_fmu, plant3_fmu, controller_fmu, supervisor_fmu) -> dict[str, Path]:
-    return {"Plant": plant_fmu, "Plant3": plant3_fmu, "Controller": controller_fmu, "Supervisor": supervisor_fmu}
+def fmus(plant_fmu, plant3_fmu, controller_fmu, supervisor_fmu, seesaw_fmu) -> dict[str, Path]:
+    return {"Plant": plant_fmu, "Plant3": plant3_fmu, "Controller": controller_fmu, "Supervisor": supervisor_fmu,
+            "Seesaw": seesaw_fmu}
 
 
 @pytest.fixture(scope="module")
@@ -93,6 +94,20 @@ def test_plant_dependencies_are_the_casadi_jacobian_structure(fmus, name):
     # At initialization the encoder steps count too.
     initial = declared(description, "initialUnknowns")
     assert set(initial["alpha_measured"]) == {"alpha", "q_alpha"} and set(initial["V_applied"]) == {"V", "V_max"}
+
+
+def test_seesaw_dependencies_are_the_casadi_jacobian_structure(fmus):
+    """Co-Simulation only: at a communication point only the voltage is a known (the states are the FMU's own)."""
+    from pendulab.model.seesaw import OUTPUTS as SEESAW_OUTPUTS
+    from pendulab.model.seesaw import SeesawModel, SeesawParameters
+
+    state, V, t = ca.SX.sym("state", 4), ca.SX.sym("V"), ca.SX.sym("t")
+    p = ca.SX.sym("p", len(SeesawParameters.names()))
+    structure = ca.jacobian_sparsity(SeesawModel().outputs(state, V, p, t), V)
+    outputs = declared(read_model_description(str(fmus["Seesaw"])))
+    for i, name in enumerate(SEESAW_OUTPUTS):
+        assert set(outputs[name]) == ({"V"} if structure.has_nz(i, 0) else set()), name
+    assert set(outputs["V_applied"]) == {"V"} and outputs["theta_measured"] == {}
 
 
 def test_controller_feeds_its_inputs_through_d(fmus):
@@ -283,7 +298,10 @@ def test_the_wired_loop_has_no_algebraic_loop(fmus):
 
 
 # ---------------------------------------------------------------- the schemas and fmpy validate
-@pytest.mark.parametrize("name", ["Plant", "Plant3", "Controller", "Supervisor"])
+ALL = ["Plant", "Plant3", "Controller", "Supervisor", "Seesaw"]
+
+
+@pytest.mark.parametrize("name", ALL)
 def test_model_description_validates_against_the_official_schema(fmus, name):
     xml = zipfile.ZipFile(fmus[name]).read("modelDescription.xml")
     version = lxml_etree.fromstring(xml).get("fmiVersion")[0]
@@ -300,7 +318,7 @@ def test_the_schema_check_catches_a_broken_description():
 
 
 # ---------------------------------------------------------------- units, metadata, documentation
-@pytest.mark.parametrize("name", ["Plant", "Plant3", "Controller", "Supervisor"])
+@pytest.mark.parametrize("name", ALL)
 def test_units_carry_base_units_and_angles_display_in_degrees(fmus, name):
     description = read_model_description(str(fmus[name]))
     units = {u.name: u for u in description.unitDefinitions}
@@ -324,7 +342,7 @@ def test_units_carry_base_units_and_angles_display_in_degrees(fmus, name):
     assert description.license == "MIT" and description.copyright and description.generationDateAndTime
 
 
-@pytest.mark.parametrize("name", ["Plant", "Plant3", "Controller", "Supervisor"])
+@pytest.mark.parametrize("name", ALL)
 def test_documentation_is_inside_the_fmu(fmus, name):
     html = zipfile.ZipFile(fmus[name]).read("documentation/index.html").decode()
     description = read_model_description(str(fmus[name]))
@@ -356,7 +374,7 @@ def ranged(description) -> list:
     return [v for v in description.modelVariables if v.min is not None or v.max is not None]
 
 
-@pytest.mark.parametrize("name", ["Plant", "Controller", "Supervisor"])
+@pytest.mark.parametrize("name", ["Plant", "Controller", "Supervisor", "Seesaw"])
 def test_every_range_is_enforced_fmi2(unzipped, name, capsys):
     description = read_model_description(str(unzipped[name] / "modelDescription.xml"))
     variables = ranged(description)

@@ -83,7 +83,9 @@ def test_ecos_runs_the_seesaw_as_fmpy_does(seesaw_fmu: Path) -> None:
     np.testing.assert_allclose(np.array(rows), run_fmu(seesaw_fmu, V, {"theta": 0.01}), rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("start, words", [({"theta": 0.5}, "beyond the end stops"), ({"J_sw": -1.0}, "must be > 0"), ({"x": math.nan}, "not finite")])
+@pytest.mark.parametrize("start, words", [({"theta": 0.5}, "abs(theta) <= theta_stop is violated (theta = 0.5, theta_stop = 0.200713)"),
+                                          ({"J_sw": -1.0}, "J_sw = -1 is outside its range 0.0001 to 100 kg.m2"),
+                                          ({"xdot": math.nan}, "not finite")])
 def test_a_start_beyond_the_stops_or_a_bad_parameter_is_refused_with_a_log_line(seesaw_fmu: Path, start: dict[str, float], words: str) -> None:
     from fmpy.fmi1 import FMICallException
     from test_plant_fmu import _VARARGS_AS_FIXED, _capturing_callbacks  # the plant's tests' logger capture
@@ -97,8 +99,8 @@ def test_a_start_beyond_the_stops_or_a_bad_parameter_is_refused_with_a_log_line(
     try:
         fmu.setupExperiment(startTime=0.0)
         fmu.enterInitializationMode()
-        fmu.setReal([vr[k] for k in start], list(start.values()))
-        with pytest.raises(FMICallException):
+        with pytest.raises(FMICallException):  # a value outside its range is refused when set, the rest on leaving
+            fmu.setReal([vr[k] for k in start], list(start.values()))
             fmu.exitInitializationMode()
         if _VARARGS_AS_FIXED:
             assert any(words in m for m in messages), messages

@@ -336,6 +336,19 @@ def _type_attributes(v: Variable, derivative: int | None) -> list[str]:
     return attrs
 
 
+def parameter_variables(table: type) -> list[Variable]:
+    """The parameters of a parameter table (a dataclass of :func:`pendulab.model.parameters._p` fields, e.g.
+    :class:`~pendulab.model.parameters.PlantParameters`) as FMU variables, with their unit, description and
+    range (a bound only where it is finite)."""
+    def finite(bound: float) -> float | None:
+        return float(bound) if math.isfinite(bound) else None
+
+    return [Variable(f.name, "Real", "parameter", start=float(f.default), unit=f.metadata["unit"],
+                     description=f.metadata["description"], initial="exact",
+                     min=finite(f.metadata["min"]), max=finite(f.metadata["max"]))
+            for f in table.__dataclass_fields__.values()]
+
+
 def _outputs(spec: ModelSpec) -> list[Variable]:
     return [v for v in spec.variables if v.causality == "output"]
 
@@ -431,7 +444,7 @@ def variables_header(spec: ModelSpec) -> str:
         fixed = ["1" if v.resolved_variability in ("fixed", "constant") else "0" for v in of_type]
         out.append(f"static const unsigned char {prefix}_FIXED[{size}] = {{{', '.join(fixed) or '0'}}};")
         # The range of each variable (fmu_common.c refuses a value set outside it), and its words for the message.
-        names = [f"{{{_c_string(v.name)}, {_c_literal(v.min, 0)}, {_c_literal(v.max, 0)}, "
+        names = [f"{{{_c_string(v.name)}, {_c_bound(v.min, '-HUGE_VAL')}, {_c_bound(v.max, 'HUGE_VAL')}, "
                  f"{_c_string(range_words(v)) if v.min is not None or v.max is not None else 'NULL'}}}" for v in of_type]
         out.append(f"static const VariableInfo {prefix}_INFO[{size}] = {{{', '.join(names) or '{NULL, 0, 0, NULL}'}}};")
     out.append(constraints_c(spec))
@@ -484,6 +497,10 @@ def constraints_c(spec: ModelSpec) -> str:
         lines.append("    }")
     lines += ["    return 1;", "}"]
     return "\n".join(lines)
+
+
+def _c_bound(value: float | int | None, missing: str) -> str:
+    return missing if value is None else _c_literal(value)
 
 
 def _c_string(text: str) -> str:

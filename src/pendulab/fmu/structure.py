@@ -56,3 +56,42 @@ def dependencies(unknowns: Mapping[str, ca.SX], knowns: Mapping[str, ca.SX], *, 
                 row[name] = "dependent"
         table[unknown] = row
     return table
+
+
+def merge(*tables: Mapping[str, Mapping[str, str]]) -> dict[str, dict[str, str]]:
+    """The union of dependency tables; a known whose kind differs between them is ``dependent``."""
+    merged: dict[str, dict[str, str]] = {}
+    for table in tables:
+        for unknown, row in table.items():
+            into = merged.setdefault(unknown, {})
+            for known, kind in row.items():
+                into[known] = kind if into.get(known, kind) == kind else "dependent"
+    return merged
+
+
+def state_space_structure(state: ca.SX, inputs: Mapping[str, ca.SX], parameters: Mapping[str, ca.SX],
+                          state_names: Sequence[str], outputs: Mapping[str, ca.SX],
+                          laws: Sequence[ca.SX] = ()) -> tuple[dict[str, dict[str, str]], dict[str, dict[str, str]]]:
+    """The model structure of an FMU whose states are outputs (the plant, the seesaw): its ``dependencies``
+    at communication points and its ``initial_dependencies``.
+
+    Parameters
+    ----------
+    state : SX (n,)
+        The states' symbols, named ``state_names``; each state is an output of its own.
+    inputs, parameters : mapping of name -> SX
+    outputs : mapping of name -> SX
+        The other outputs as expressions of states, inputs and parameters (switches and all).
+    laws : sequence of SX (n,)
+        Right-hand sides (each law the FMU may use: Co-Simulation's, Model Exchange's); their structures are
+        merged into the derivatives ``der(<state>)``.
+    """
+    knowns = {**{s: state[k] for k, s in enumerate(state_names)}, **inputs}
+    unknowns = {**{s: state[k] for k, s in enumerate(state_names)}, **outputs}
+    initial_unknowns = dict(outputs)
+    tables, initial = [dependencies(unknowns, knowns, parameters=list(parameters.values()), smooth=False)], []
+    for law in laws or [None]:
+        derivatives = {} if law is None else {f"der({s})": law[k] for k, s in enumerate(state_names)}
+        tables.append(dependencies(derivatives, knowns, parameters=list(parameters.values()), smooth=False))
+        initial.append(dependencies({**initial_unknowns, **derivatives}, {**knowns, **parameters}, smooth=False))
+    return merge(*tables), merge(*initial)

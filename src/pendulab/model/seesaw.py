@@ -44,7 +44,7 @@ import control
 import numpy as np
 
 from pendulab.errors import ParameterError
-from pendulab.model.parameters import PlantParameters, _p
+from pendulab.model.parameters import PlantParameters, _p, check_ranges
 from pendulab.model.plant import MAX_SUBSTEP, _amplifier, _friction_regime, mean_poke_acceleration, poke_acceleration, quantize, substeps
 
 STATES = ("x", "xdot", "theta", "thetadot")
@@ -59,7 +59,7 @@ def _cart_field(name: str) -> Any:
     """A field of the cart, motor, amplifier, friction or cart encoder, as the pendulum plant declares it."""
     f = PlantParameters.__dataclass_fields__[name]
     m = f.metadata
-    return _p(f.default, m["unit"], m["description"], minimum=m["min"], positive=m["positive"])
+    return _p(f.default, m["unit"], m["description"], minimum=m["min"], maximum=m["max"], positive=m["positive"])
 
 
 @dataclass(frozen=True)
@@ -92,31 +92,24 @@ class SeesawParameters:
     B: float = _cart_field("B")
     q_x: float = _cart_field("q_x")
     track_half_length: float = _cart_field("track_half_length")
-    rotor_inertia: float = _p(0.0, "1", "1 lumps the motor's rotor inertia into the cart along the track; 0 neglects it (Quanser's model)")
+    rotor_inertia: float = _p(0.0, "1", "1 lumps the motor's rotor inertia into the cart along the track; 0 neglects it (Quanser's model)", 0, 1)
     # the seesaw (config_ssw.m)
-    M_sw: float = _p(3.6, "kg", "Mass of the seesaw and track, without the cart", positive=True)
-    D_T: float = _p(0.125, "m", "Pivot to the track (the cart's centre of gravity)")
-    D_C: float = _p(0.058, "m", "Pivot to the centre of gravity of seesaw and track, above the pivot")
-    J_sw: float = _p(0.395, "kg.m2", "Inertia of the seesaw and track about the pivot", positive=True)
-    B_sw: float = _p(0.0, "N.m.s/rad", "Viscous damping at the pivot")
-    q_theta: float = _p(SEESAW_COUNT, "rad", "Tilt encoder step (0 = no quantization)")
+    M_sw: float = _p(3.6, "kg", "Mass of the seesaw and track, without the cart", 0.01, 100)
+    D_T: float = _p(0.125, "m", "Pivot to the track (the cart's centre of gravity)", 0, 5)
+    D_C: float = _p(0.058, "m", "Pivot to the centre of gravity of seesaw and track, above the pivot", 0, 5)
+    J_sw: float = _p(0.395, "kg.m2", "Inertia of the seesaw and track about the pivot", 1e-4, 100)
+    B_sw: float = _p(0.0, "N.m.s/rad", "Viscous damping at the pivot", 0, 100)
+    q_theta: float = _p(SEESAW_COUNT, "rad", "Tilt encoder step (0 = no quantization)", 0, 1)
     theta_stop: float = _p(
-        math.radians(11.5), "rad", "Tilt end stops: the seesaw rests on the floor at +/- this tilt", positive=True
+        math.radians(11.5), "rad", "Tilt end stops: the seesaw rests on the floor at +/- this tilt (above pi: no stops)", 1e-3, 10
     )
     # tap: a rectangular pulse added to the tilt's angular acceleration
-    tap_magnitude: float = _p(3.3, "rad/s2", "Tap magnitude (3.3 for 0.1 s tilts the seesaw about 5 deg under Quanser's LQR)", minimum=-math.inf)
-    tap_duration: float = _p(0.1, "s", "Tap duration")
-    tap_start: float = _p(1.0, "s", "Tap start time")
+    tap_magnitude: float = _p(3.3, "rad/s2", "Tap magnitude (3.3 for 0.1 s tilts the seesaw about 5 deg under Quanser's LQR)", -1e5, 1e5)
+    tap_duration: float = _p(0.1, "s", "Tap duration", 0, 1e3)
+    tap_start: float = _p(1.0, "s", "Tap start time", 0, 1e6)
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-                raise ParameterError(f"seesaw parameter {f.name}={value!r} is not a finite number; give a real value in {f.metadata['unit']}")
-            if value < f.metadata["min"]:
-                raise ParameterError(f"seesaw parameter {f.name}={value} is negative; it must be >= 0 {f.metadata['unit']}")
-            if f.metadata["positive"] and value <= 0:
-                raise ParameterError(f"seesaw parameter {f.name}={value} must be > 0 {f.metadata['unit']}")
+        check_ranges(self, "seesaw parameter")
         if self.rotor_inertia not in (0.0, 1.0):
             raise ParameterError(f"seesaw parameter rotor_inertia={self.rotor_inertia} must be 0 (neglected) or 1 (lumped)")
 

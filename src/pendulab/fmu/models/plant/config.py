@@ -7,9 +7,9 @@ from pathlib import Path
 
 import casadi as ca
 
-from pendulab.fmu.description import ModelSpec, Variable
+from pendulab.fmu.description import ModelSpec, Variable, parameter_variables
 from pendulab.fmu.models.plant.documentation import documentation
-from pendulab.fmu.structure import dependencies
+from pendulab.fmu.structure import state_space_structure
 from pendulab.model.parameters import CONSTRAINTS, PlantParameters
 from pendulab.model.plant import EVENT_INDICATORS, MAX_SUBSTEP, OUTPUTS, REGIME, STATES, PlantModel
 
@@ -27,17 +27,6 @@ _TRACK_MAX = PlantParameters.__dataclass_fields__["track_half_length"].metadata[
 _STATE_RANGE = {"x": (-_TRACK_MAX, _TRACK_MAX)}
 
 
-def _merge(*tables: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
-    """The union of dependency tables; a known whose kind differs between them is ``dependent``."""
-    merged: dict[str, dict[str, str]] = {}
-    for table in tables:
-        for unknown, row in table.items():
-            into = merged.setdefault(unknown, {})
-            for known, kind in row.items():
-                into[known] = kind if into.get(known, kind) == kind else "dependent"
-    return merged
-
-
 def model_structure() -> tuple[dict[str, dict[str, str]], dict[str, dict[str, str]]]:
     """The plant's dependencies (at communication points / in continuous time, and at initialization) from the
     CasADi model's Jacobian structure: the outputs from ``plant_outputs``, the derivatives from both the
@@ -47,17 +36,11 @@ def model_structure() -> tuple[dict[str, dict[str, str]], dict[str, dict[str, st
     state, V, pvec, t, _ = model._symbols()
     regime = ca.SX.sym("regime", len(REGIME))
     measured = model.outputs(state, V, pvec, t)
-    laws = (model.ode(state, V, pvec, t), model.ode_regime(state, V, pvec, t, regime))
-    knowns = {**{s: state[k] for k, s in enumerate(STATES)}, "V": V}
-    parameters = {name: pvec[k] for k, name in enumerate(PlantParameters.names())}
-    outputs = {**knowns, **{name: measured[k] for k, name in enumerate(OUTPUTS)}}
-    del outputs["V"]
-    tables, initial = [], []
-    for law in laws:
-        derivatives = {f"der({s})": law[k] for k, s in enumerate(STATES)}
-        tables.append(dependencies({**outputs, **derivatives}, knowns, parameters=list(parameters.values()), smooth=False))
-        initial.append(dependencies({**{n: outputs[n] for n in OUTPUTS}, **derivatives}, {**knowns, **parameters}, smooth=False))
-    return _merge(*tables), _merge(*initial)
+    return state_space_structure(
+        state, {"V": V}, {name: pvec[k] for k, name in enumerate(PlantParameters.names())}, STATES,
+        {name: measured[k] for k, name in enumerate(OUTPUTS)},
+        laws=(model.ode(state, V, pvec, t), model.ode_regime(state, V, pvec, t, regime)),
+    )
 
 
 def spec() -> ModelSpec:
@@ -78,12 +61,7 @@ def spec() -> ModelSpec:
         Variable("V_applied", "Real", "output", unit="V", description="Voltage after the amplifier saturation"),
         Variable("F_friction", "Real", "output", unit="N", description="Stick-slip friction force on the cart"),
     ]
-    ranges = {f.name: (f.metadata["min"], f.metadata["max"]) for f in PlantParameters.__dataclass_fields__.values()}
-    parameters = [
-        Variable(name, "Real", "parameter", start=float(default), unit=unit, description=text, initial="exact",
-                 min=float(ranges[name][0]), max=float(ranges[name][1]))
-        for name, default, unit, text in PlantParameters.describe()
-    ]
+    parameters = parameter_variables(PlantParameters)
     structure, initial_structure = model_structure()
     # The generated equations; any change to the model changes the text and so the GUID.
     with tempfile.TemporaryDirectory() as tmp:

@@ -9,9 +9,12 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from pendulab.fmu.description import ModelSpec, Variable
+import casadi as ca
+
+from pendulab.fmu.description import ModelSpec, Variable, parameter_variables
+from pendulab.fmu.structure import state_space_structure
 from pendulab.model.plant import MAX_SUBSTEP
-from pendulab.model.seesaw import STATES, SeesawModel, SeesawParameters
+from pendulab.model.seesaw import OUTPUTS, STATES, SeesawModel, SeesawParameters
 
 _STATE_TEXT = {
     "x": ("m", "Cart position along the track (0 at its centre)"),
@@ -19,6 +22,18 @@ _STATE_TEXT = {
     "theta": ("rad", "Seesaw tilt from level (positive counter-clockwise facing the cart: the +x end up)"),
     "thetadot": ("rad/s", "Seesaw tilt rate"),
 }
+
+
+def model_structure(model: SeesawModel) -> tuple[dict[str, dict[str, str]], dict[str, dict[str, str]]]:
+    """The outputs' dependencies from the CasADi model's Jacobian structure (``seesaw_outputs``): on the voltage
+    at communication points (V_applied, F_friction), on states, V and parameters at initialization."""
+    state, V, t = ca.SX.sym("state", len(STATES)), ca.SX.sym("V"), ca.SX.sym("t")
+    pvec = ca.SX.sym("p", len(SeesawParameters.names()))
+    measured = model.outputs(state, V, pvec, t)
+    structure, initial = state_space_structure(state, {"V": V}, {n: pvec[k] for k, n in enumerate(SeesawParameters.names())},
+                                               STATES, {name: measured[k] for k, name in enumerate(OUTPUTS)})
+    # Co-Simulation only: the states are the FMU's own, not knowns at a communication point (only V is).
+    return {u: {k: kind for k, kind in row.items() if k == "V"} for u, row in structure.items()}, initial
 
 
 def spec() -> ModelSpec:
@@ -33,10 +48,7 @@ def spec() -> ModelSpec:
         Variable("V_applied", "Real", "output", unit="V", description="Voltage after the amplifier saturation"),
         Variable("F_friction", "Real", "output", unit="N", description="Stick-slip friction force on the cart"),
     ]
-    parameters = [
-        Variable(f.name, "Real", "parameter", start=float(f.default), unit=f.metadata["unit"], description=f.metadata["description"], initial="exact")
-        for f in SeesawParameters.__dataclass_fields__.values()
-    ]
+    parameters = parameter_variables(SeesawParameters)
     with tempfile.TemporaryDirectory() as tmp:
         model = SeesawModel()
         c_file = model.generate_c(Path(tmp))
@@ -45,12 +57,18 @@ def spec() -> ModelSpec:
         work_doubles = max(f.sz_w() for f in functions)
         work_ints = max(f.sz_iw() for f in functions)
     names = SeesawParameters.names()
+    structure, initial_structure = model_structure(model)
     return ModelSpec(
         identifier="Seesaw",
         description="IP02 cart on Quanser's SEESAW-E: DC motor, stick-slip friction, encoder quantization, track and tilt end stops, tap",
         variables=states + signals + parameters,
         sources=["model.c", "seesaw_casadi.c"],
         generated=generated,
+        dependencies=structure,
+        initial_dependencies=initial_structure,
+        constraints=(("abs(x) <= track_half_length", "the cart starts between the track's end stops"),
+                     ("abs(theta) <= theta_stop", "the seesaw starts between its tilt end stops")),
+        documentation=__doc__.split("\n\n", 1)[1].replace("\n", " ").join(("<h2>Model</h2><p>", "</p>")),
         defines={
             "VR_FIRST_PARAMETER": f"VR_{names[0]}",
             "N_PARAMETERS": str(len(names)),
@@ -58,6 +76,5 @@ def spec() -> ModelSpec:
             "MAX_SUBSTEP": repr(MAX_SUBSTEP),
             "SEESAW_WORK_DOUBLES": str(max(1, work_doubles)),
             "SEESAW_WORK_INTS": str(max(1, work_ints)),
-            "PARAMETER_NAMES": "((const char *[]){" + ", ".join(f'"{n}"' for n in names) + "})",
         },
     )
