@@ -204,8 +204,8 @@ def _mode_variables() -> list[Variable]:
                         min=low, max=high)
 
     return [
-        Variable("r", "Real", "output", unit="m",
-                 description="Tip reference for the controller (e = r - Lp*alpha): 0 unless re-centring acts"),
+        Variable("r", "Real", "output", variability="discrete", unit="m",
+                 description="Tip reference for the controller (e = r - Lp*alpha): 0 unless re-centring acts; sampled (set by each step, held until the next)"),
         Variable("swing_voltage", "Real", "output", unit="V",
                  description="The swing-up's voltage (applied as V while swinging up)"),
         Variable("energy", "Real", "output", unit="1",
@@ -255,8 +255,9 @@ CONSTRAINTS = (
     ("recentre_x_off < recentre_x_on", "re-centring lets go closer to the centre than it engages: set recentre_x_off < recentre_x_on"),
     ("recentre_x_on < x_max", "re-centring engages inside the track limit: set recentre_x_on < x_max"),
 )
-#: Outputs that depend on fewer inputs than all (model.c: alpha is the measured angle, converted in rig_mode).
-FEEDTHROUGH = {"alpha": ("alpha_measured",)}
+#: Outputs that depend on fewer inputs than all (model.c: alpha is the measured angle, converted in rig_mode;
+#: the reference r is sampled, held from the last step).
+FEEDTHROUGH: dict[str, tuple[str, ...]] = {"alpha": ("alpha_measured",), "r": ()}
 #: Inputs that no output depends on (the iteration is only announced in the log).
 NO_FEEDTHROUGH = ("iteration",)
 

@@ -414,7 +414,10 @@ void model_update_outputs(Instance *comp) {
     comp->r[VR_alpha] = upright_angle(comp);
     comp->r[VR_V] = m.state == STATE_RUNNING ? clamp(v, limit) : m.state == STATE_SWINGING ? clamp(m.swing_voltage, limit) : 0.0;
     comp->b[VR_motor_enable] = m.state == STATE_RUNNING || m.state == STATE_SWINGING;
-    comp->r[VR_r] = m.r;
+    /* The reference is sampled: the value the last step committed, held until the next (no direct feedthrough,
+     * so that controller -> supervisor -> controller through r is no algebraic loop; pendulab's master gave
+     * the controller the previous point's r for its output already). */
+    comp->r[VR_r] = MEMORY(comp)->r;
     comp->r[VR_swing_voltage] = m.swing_voltage;
     comp->r[VR_energy] = energy(comp, &m, comp->r[VR_alpha]);
     comp->b[VR_recentring] = m.recentring;
