@@ -91,7 +91,7 @@ def test_every_start_value_and_open_input_is_a_parameter_inline_and_in_the_ssv(l
     ssp = export_ssp(loop, tmp_path / "loop.ssp")
     ssd = read_ssd(str(ssp), validate=True)
     # The inputs no connection feeds get a value (the FMU's start value) beside the start values.
-    open_inputs = {"controller": {"r"}, "supervisor": {"command", "iteration"}, "plant": set()}
+    open_inputs = {"controller": {"x_measured"}, "supervisor": {"command", "iteration"}, "plant": set()}
     (system_binding,) = ssd.system.parameterBindings
     assert system_binding.source == PARAMETER_FILE
     from_file = {p.name: (p.type, p.value) for p in read_ssv(str(ssp), resource=PARAMETER_FILE).parameters}
@@ -114,7 +114,7 @@ def test_every_start_value_and_open_input_is_a_parameter_inline_and_in_the_ssv(l
             else:
                 assert kind == "Real" and float(text) == float(value), name  # repr round-trips exactly
     counts = {e.name: len(e.parameterBindings[0].parameterValues[0].parameters) for e in ssd.system.elements}
-    assert counts["controller"] == 1 + 3 * 3 + 3 + 3 + 1 + 2 + 1  # n; A, B, C of order 3; D; Lp and h; r
+    assert counts["controller"] == 1 + 3 * 3 + 3 + 3 + 1 + 2 + 1  # n; A, B, C of order 3; D; Lp and h; x_measured
 
 
 def test_the_ssd_states_units_and_step(loop, loop_ssp):
