@@ -107,7 +107,8 @@ class PlantParameters:
     q_alpha: float = _p(0.001, "rad", "Angle encoder step (0 = no quantization)", 0, 1)
     q_x: float = _p(22.75e-6, "m", "Cart encoder step (0 = no quantization)", 0, 1)
     # poke: a rectangular pulse added to the angular acceleration
-    poke_magnitude: float = _p(50.0, "rad/s2", "Poke magnitude", -1e5, 1e5)
+    # Any finite pulse (a huge one overflows the state, which the FMU's step reports as an error).
+    poke_magnitude: float = _p(50.0, "rad/s2", "Poke magnitude", -1e15, 1e15)
     poke_duration: float = _p(0.005, "s", "Poke duration", 0, 1e3)
     poke_start: float = _p(1.0, "s", "Poke start time", 0, 1e6)
     # track: the cart stops dead at the end stops (appended last: earlier value references stay stable)
