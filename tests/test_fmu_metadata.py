@@ -26,8 +26,8 @@ from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
 from pendulab.cosim.pendulum import CONNECTIONS
-from pendulab.fmu.description import model_description_xml
 from pendulab.fmu.build import model_spec
+from pendulab.fmu.description import model_description_xml
 from pendulab.fmu.units import UNITS
 from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import OUTPUTS, REGIME, STATES, PlantModel

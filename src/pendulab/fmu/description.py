@@ -521,7 +521,9 @@ def documentation_html(spec: ModelSpec) -> str:
     """The FMU's ``documentation/index.html``: what the model is (its own sections: equations, state machine,
     ...), then every variable with unit, range and default, and the model structure, all from the spec."""
     def cell(value: object) -> str:
-        return "" if value is None else escape(_literal(value) if not isinstance(value, str) else value)
+        if value is None:
+            return ""
+        return escape(f"{value:.6g}" if isinstance(value, float) else _literal(value))  # type: ignore[arg-type]
 
     rows = []
     for v in spec.variables:

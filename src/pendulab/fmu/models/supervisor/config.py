@@ -28,6 +28,7 @@ Examples
 from __future__ import annotations
 
 import math
+import textwrap
 
 from pendulab.fmu.description import ModelSpec, Variable
 
@@ -282,7 +283,7 @@ def documentation() -> str:
                        for name, code in COMMANDS.items())
     return f"""
 <h2>State machine</h2>
-<pre>{__doc__.split("States (output ``state``)::")[1].split("Examples")[0].strip()}</pre>
+<pre>{textwrap.dedent(__doc__.split("States (output ``state``)::")[1].split("Examples")[0]).strip()}</pre>
 <h3>States (output <code>state</code>)</h3>
 <table><tr><th>code</th><th>state</th></tr>{rows}</table>
 <h3>Trip reasons (output <code>trip_reason</code>)</h3>
