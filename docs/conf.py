@@ -56,11 +56,15 @@ def _fmu_tables(app) -> None:
     for name in ALL_FMUS:
         spec = model_spec(name)
         lines += [f"## {name}.fmu", "", f"{spec.description} (FMI {spec.fmi_version}.0).", "",
-                  "| name | causality | type | start | unit | description |", "|---|---|---|---|---|---|"]
+                  "| name | causality | type | start | min | max | unit | description |", "|---|---|---|---|---|---|---|---|"]
+
+        def number(value: object) -> str:
+            return "" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
+
         for v in spec.variables:
-            start = "" if v.start is None else f"{v.start:g}" if isinstance(v.start, float) else str(v.start)
             text = v.description.replace("|", "\\|")
-            lines.append(f"| `{v.name}` | {v.causality} | {getattr(v.type, 'name', v.type)} | {start} | {v.unit} | {text} |")
+            lines.append(f"| `{v.name}` | {v.causality} | {getattr(v.type, 'name', v.type)} | {number(v.start)} | "
+                         f"{number(v.min)} | {number(v.max)} | {v.unit} | {text} |")
         lines.append("")
     out = Path(app.srcdir) / "_generated"
     out.mkdir(exist_ok=True)
