@@ -55,7 +55,7 @@ def per_row_csv(names: list[str], data: np.ndarray) -> bytes:
 
 def baseline_run(controller: object, stop_time: float, out: Path) -> float:
     """Wall time of the run and its files written one after the other, run.csv by :func:`per_row_csv`."""
-    from pendulab.analysis.results import _column_table, _json_safe, _matlab_meta
+    from pendulab.analysis.results import _column_table, _matlab_meta, json_safe
     from pendulab.simulation import simulate
     from pendulab.spec import RunSpec, Timing
 
@@ -65,7 +65,7 @@ def baseline_run(controller: object, stop_time: float, out: Path) -> float:
     out.mkdir()
     variables = {n: data[:, [j]] for j, n in enumerate(names)}
     scipy.io.savemat(out / "run.mat", {**variables, "meta": _matlab_meta(result.meta)}, format="5", oned_as="column")
-    (out / "metrics.json").write_text(json.dumps(_json_safe(result.metrics), indent=2) + "\n")
+    (out / "metrics.json").write_text(json.dumps(json_safe(result.metrics), indent=2) + "\n")
     (out / "run.csv").write_bytes(per_row_csv(names, data))
     return time.perf_counter() - t0
 

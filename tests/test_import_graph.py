@@ -93,3 +93,19 @@ def test_the_bench_does_not_import_the_tests():
     for path in sorted((ROOT / "bench").glob("*.py")):
         for line, module, _ in imports(path):
             assert module.split(".")[0] != "tests", f"{path.name}:{line} imports {module}"
+
+
+@pytest.mark.parametrize("statement, allowed", [
+    ("import pendulab", set()),
+    ("import pendulab; pendulab.simulate; pendulab.RunSpec", {"numpy"}),
+])
+def test_the_top_level_imports_the_heavy_libraries_only_when_used(statement, allowed):
+    """``import pendulab`` stays light: fmpy, CasADi, python-control, SciPy and matplotlib load when a run or a
+    linearization needs them (a machine-independent stand-in for the import time the closing note measures)."""
+    import subprocess
+    import sys
+
+    heavy = ("numpy", "fmpy", "casadi", "control", "scipy", "matplotlib")
+    code = f"{statement}; import sys; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
+    loaded = set(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split())
+    assert loaded <= allowed, f"{statement!r} imports {sorted(loaded - allowed)}"

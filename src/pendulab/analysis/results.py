@@ -107,7 +107,7 @@ def write_results(
             format="5",
             oned_as="column",
         ),
-        "metrics": lambda f: f.write((json.dumps(_json_safe(metrics), indent=2, allow_nan=False) + "\n").encode()),
+        "metrics": lambda f: f.write((json.dumps(json_safe(metrics), indent=2, allow_nan=False) + "\n").encode()),
     }
     # Write every file to a temporary name first, then move them all into place: a failure half
     # way leaves the previous run's files (or none), never a mixture or a truncated file.
@@ -355,13 +355,25 @@ def _matlab_field(name: str) -> str:
     return field[:31]
 
 
-def _json_safe(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
+    """Plain JSON data: numpy scalars and arrays as Python numbers and lists, non-finite numbers as ``None``.
+
+    Parameters
+    ----------
+    value : any
+        Mappings, sequences, numpy arrays and scalars, numbers, text.
+
+    Examples
+    --------
+    >>> json_safe({"a": np.float64(1.5), "b": [np.inf, np.int64(2)], "c": np.bool_(True)})
+    {'a': 1.5, 'b': [None, 2], 'c': True}
+    """
     if isinstance(value, Mapping):
-        return {str(k): _json_safe(v) for k, v in value.items()}
+        return {str(k): json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
+        return [json_safe(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
+        return json_safe(value.tolist())
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):

@@ -190,6 +190,7 @@ def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
     import numpy as np
 
     from pendulab.analysis.compare import load_compared
+    from pendulab.analysis.results import json_safe
 
     run = load_compared(folder)
     n = run.columns["t"].size
@@ -207,7 +208,7 @@ def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
         "source": run.source,
         "poke_start": run.poke_start,
         "columns": columns,
-        "metrics": _json_safe(run.metrics),
+        "metrics": json_safe(run.metrics),
         "files": files,
         "Lp": meta_lp,
     }
@@ -217,18 +218,3 @@ def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
 DOWNLOADABLE = (".mat", ".csv", ".json", ".png", ".gif")
 
 
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, Mapping):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    try:
-        import numpy as np
-
-        if isinstance(value, np.generic):
-            return _json_safe(value.item())
-    except ImportError:  # pragma: no cover
-        pass
-    return value
