@@ -109,3 +109,15 @@ def test_the_top_level_imports_the_heavy_libraries_only_when_used(statement, all
     code = f"{statement}; import sys; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
     loaded = set(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split())
     assert loaded <= allowed, f"{statement!r} imports {sorted(loaded - allowed)}"
+
+
+@pytest.mark.parametrize("module", ["pendulab.cosim.master", "pendulab.hil.session", "pendulab.hil.emulator", "pendulab.calibration.rig"])
+def test_what_steps_an_fmu_uses_no_other_modules_private_names(module):
+    """The master, the lab session, the rig emulator and the virtual rig step FMUs through the one component
+    layer (pendulab.cosim.component), with its public names only."""
+    path = PACKAGE.joinpath(*module.split(".")[1:]).with_suffix(".py")
+    private = [f"{line}: {name} from {source}" for line, source, names in imports(path) if source.startswith("pendulab")
+               for name in names if name.startswith("_") and not name.startswith("__")]
+    assert not private, private
+    sources = {source for _, source, _ in imports(path)}
+    assert "pendulab.cosim.component" in sources

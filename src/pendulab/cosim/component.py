@@ -35,8 +35,9 @@ from fmpy.fmi2 import FMU2Slave
 
 from pendulab.errors import UserError
 
-_TYPES = ("Real", "Integer", "Boolean")
-_C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
+#: The FMI 2.0 base types a :class:`Port` holds, and their ctypes.
+BASE_TYPES = ("Real", "Integer", "Boolean")
+C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
 
 
 class SimulationError(RuntimeError):
@@ -58,20 +59,20 @@ class Port:
     @classmethod
     def create(cls, variables: Sequence[tuple[str, str, int]]) -> "Port":
         """From ``(name, base type, value reference)`` triples."""
-        names: dict[str, list[str]] = {t: [] for t in _TYPES}
-        refs: dict[str, list[int]] = {t: [] for t in _TYPES}
+        names: dict[str, list[str]] = {t: [] for t in BASE_TYPES}
+        refs: dict[str, list[int]] = {t: [] for t in BASE_TYPES}
         for name, vtype, vr in variables:
             names[vtype].append(name)
             refs[vtype].append(vr)
         return cls(
-            vrs={t: (ctypes.c_uint * len(refs[t]))(*refs[t]) for t in _TYPES},
-            values={t: (_C_TYPES[t] * len(refs[t]))() for t in _TYPES},
+            vrs={t: (ctypes.c_uint * len(refs[t]))(*refs[t]) for t in BASE_TYPES},
+            values={t: (C_TYPES[t] * len(refs[t]))() for t in BASE_TYPES},
             names=names,
         )
 
     def index(self, name: str) -> tuple[str, int]:
         """``(base type, index)`` of a variable in :attr:`values`."""
-        for t in _TYPES:
+        for t in BASE_TYPES:
             if name in self.names[t]:
                 return t, self.names[t].index(name)
         raise KeyError(name)
@@ -217,14 +218,14 @@ class Component:
 
     def read(self, port: Port) -> None:
         """Fill ``port.values`` from the FMU."""
-        for t in _TYPES:
+        for t in BASE_TYPES:
             n = len(port.names[t])
             if n and self.get[t](self.handle, port.vrs[t], n, port.values[t]) > 1:
                 raise SimulationError(f"{self.name}: fmi2Get{t} failed")
 
     def write(self, port: Port) -> None:
         """Set the FMU's variables from ``port.values``."""
-        for t in _TYPES:
+        for t in BASE_TYPES:
             n = len(port.names[t])
             if n and self.set[t](self.handle, port.vrs[t], n, port.values[t]) > 1:
                 raise SimulationError(f"{self.name}: fmi2Set{t} failed")

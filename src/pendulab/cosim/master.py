@@ -26,7 +26,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from pendulab.cosim.component import _C_TYPES, _TYPES, Component, SimulationError
+from pendulab.cosim.component import BASE_TYPES, C_TYPES, Component, SimulationError
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
 
@@ -336,7 +336,7 @@ class _Plan:
         for name in order:
             inst = master.instances[name]
             gets = []
-            by_type: dict[str, list[str]] = {t: [] for t in _TYPES}
+            by_type: dict[str, list[str]] = {t: [] for t in BASE_TYPES}
             for var in dict.fromkeys(read[name]):
                 by_type[_base(inst.variable(var).type)].append(var)
             for t, names in by_type.items():
@@ -369,12 +369,12 @@ class _Plan:
         for name in order:
             inst = master.instances[name]
             targets = [c.target_variable for c in system.connections if c.target == name]
-            for t in _TYPES:
+            for t in BASE_TYPES:
                 for is_late in (False, True):
                     names = [v for v in dict.fromkeys(targets) if _base(inst.variable(v).type) == t and late_input[(name, v)] == is_late]
                     if not names:
                         continue
-                    buf = (_C_TYPES[t] * len(names))()
+                    buf = (C_TYPES[t] * len(names))()
                     vrs = (ctypes.c_uint * len(names))(*(inst.variable(v).valueReference for v in names))
                     f = _GET((f"fmi2Set{t}".encode(), inst.fmu.dll))
                     self._keep += [buf, vrs, f]
