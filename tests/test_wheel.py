@@ -18,6 +18,7 @@ virtual machine and says so).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -167,16 +168,22 @@ def _lab_session(env: Env, out: str) -> tuple[int, str, str]:
     return lab.returncode, stdout, stderr
 
 
+#: How a session ends when this machine, not pendulab, is too slow for a 1 kHz link (as in test_hil_lab_modes).
+HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time", "while setting up the session",
+                 "stopped streaming samples")
+
+
 def test_lab_demo_against_the_rig_emulator_for_5_s(wheel_env):
     """As in test_hil_lab: a session on a loaded machine may lose its real-time link (the rig's watchdog trips, the
-    lab ends with the motor off and the log kept, as on a rig); that is printed and the session run once more."""
+    lab ends with the motor off and the log kept, as on a rig); that is printed and the session run again (at most
+    three in all). Any other ending fails at once."""
     env: Env = wheel_env["env"]
-    out = "runs/lab"
-    status, stdout, stderr = _lab_session(env, out)
-    if status != 0 and "ended by the operator" not in stdout:
-        print(f"first session ended early (status {status}): {stdout.strip().splitlines()[-1:]}")
-        out = "runs/lab-again"
+    for attempt in range(3):
+        out = f"runs/lab-{attempt}"
         status, stdout, stderr = _lab_session(env, out)
+        if status == 0 or not any(reason in stdout + stderr for reason in HOST_TOO_SLOW):
+            break
+        print(f"session {attempt + 1} ended early on a loaded host (status {status}): {stdout.strip().splitlines()[-1:]}")
     assert status == 0, (stdout[-2000:], stderr[-2000:])
     assert "ended by the operator (e)" in stdout, stdout[-2000:]
     for name in ("rig_log.csv", "run.mat", "metrics.json", "timing.json"):
@@ -187,18 +194,19 @@ def test_lab_demo_against_the_rig_emulator_for_5_s(wheel_env):
 def test_fit_on_the_calibrate_log_without_a_compiler(wheel_env):
     """The ramp test on the virtual rig, then ``fit`` on its log with no compiler on the PATH at all (the fake ones
     would be called, fail, and give the same fallback): CasADi's virtual machine instead of C, said to the user.
-    Here the fit is of B, Beq and the force gain, which the virtual machine does in about 35 s of CPU; the
-    whole fit, with and without a compiler, is timed in bench/wheel.py."""
+    Here the fit is of the force gain alone, which the virtual machine does in about 25 s of CPU (the default seven
+    parameters take 85 s); the whole fit, with and without a compiler, is timed in bench/wheel.py."""
     env: Env = wheel_env["env"]
     calibrate = env.run("pendulab calibrate --virtual --iterations 1 --out cal.json --log ramp.csv")
     assert calibrate.returncode == 0, calibrate.stderr[-2000:]
     start = time.perf_counter()
-    fit = env.run("pendulab fit ramp.csv --pendulum none --fit B,Beq,force_gain --out fitted.json", timeout=600, fakes=False)
+    fit = env.run("pendulab fit ramp.csv --pendulum none --fit force_gain --out fitted.json", timeout=600, fakes=False)
     seconds = time.perf_counter() - start
     assert fit.returncode == 0, (fit.stdout[-3000:], fit.stderr[-2000:])
     assert "no C compiler: CasADi's virtual machine" in fit.stdout + fit.stderr
-    assert (env.work / "fitted.json").is_file()
-    print(f"\nfit (B, Beq, force gain) of the 1-iteration ramp log without a compiler: {seconds:.1f} s")
+    fitted = json.loads((env.work / "fitted.json").read_text())["force_gain"]
+    assert abs(fitted - 1.0) < 0.02, fitted  # the virtual rig's force gain is the model's, 1 (measured: 1.0044)
+    print(f"\nfit (force gain = {fitted:.4f}) of the 1-iteration ramp log without a compiler: {seconds:.1f} s")
 
 
 #: The Python versions a lab PC may have.
@@ -235,8 +243,6 @@ def test_every_dependency_has_a_windows_wheel_for_python_3_10_to_3_13(tmp_path):
     for python, proc in runs.items():
         _, stderr = proc.communicate(timeout=600)
         assert proc.returncode == 0, (python, stderr[-3000:])
-        import json
-
         report = json.loads((tmp_path / f"{python}.json").read_text())
         files = {i["metadata"]["name"].lower(): i["download_info"]["url"].rsplit("/", 1)[-1] for i in report["install"]}
         assert DIRECT <= set(files), (python, sorted(files))
