@@ -37,21 +37,24 @@ import numpy as np
 
 PYTHON = sys.executable
 ENV = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
-AT = 17.0  # s after the host connects
-#: ending -> (emulator options, signal sent by the bench or None, the emulator's words for the event, calibrate's)
-ENDINGS = {
-    "fault": (["--fault-after", str(AT)], None, "fault (amplifier", "fault"),
-    "restart": (["--restart-after", str(AT)], None, "restart: firmware reset", "restarted"),
-    "stall": (["--stall-after", str(AT), "--stall-for", "0.5"], None, "link stalled", "link lost"),
-    "port closed": (["--close-after", str(AT)], None, "closing the port", "link lost"),
-    "SIGINT": ([], signal.SIGINT, "motor off", "interrupted"),
-    "SIGTERM": ([], signal.SIGTERM, "motor off", "SIGTERM"),
-}
+AT = 17.0  # s after the host connects (--at)
 STAMP = re.compile(r"\[rig\s+([0-9.]+) s\]")
 
 
-def one_run(name: str, folder: Path) -> dict:
-    options, sig, words, named = ENDINGS[name]
+def endings(at: float) -> dict:
+    """ending -> (emulator options, signal sent by the bench or None, the emulator's words for the event, calibrate's)."""
+    return {
+        "fault": (["--fault-after", str(at)], None, "fault (amplifier", "fault"),
+        "restart": (["--restart-after", str(at)], None, "restart: firmware reset", "restarted"),
+        "stall": (["--stall-after", str(at), "--stall-for", "0.5"], None, "link stalled", "link lost"),
+        "port closed": (["--close-after", str(at)], None, "closing the port", "link lost"),
+        "SIGINT": ([], signal.SIGINT, "motor off", "interrupted"),
+        "SIGTERM": ([], signal.SIGTERM, "motor off", "SIGTERM"),
+    }
+
+
+def one_run(name: str, folder: Path, at: float = AT) -> dict:
+    options, sig, words, named = endings(at)[name]
     emu = subprocess.Popen([PYTHON, "-m", "pendulab", "rig-emulator", "--pendulum", "none", "--friction", "2,0.004,3.5,0.04,25", *options],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
     port = emu.stdout.readline().strip()  # type: ignore[union-attr]
@@ -67,7 +70,7 @@ def one_run(name: str, folder: Path) -> dict:
         deadline = time.monotonic() + 30
         while not any("host connected" in ln for ln in lines) and time.monotonic() < deadline:
             time.sleep(0.05)
-        time.sleep(AT)
+        time.sleep(at)
         cal.send_signal(sig)
     stdout, stderr = cal.communicate(timeout=120)
     time.sleep(0.5)
@@ -99,13 +102,14 @@ def one_run(name: str, folder: Path) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", help="comma-separated endings")
+    parser.add_argument("--at", type=float, default=AT, help=f"s after the host connects (default {AT:g}: in the second iteration)")
     args = parser.parse_args()
-    names = args.only.split(",") if args.only else list(ENDINGS)
+    names = args.only.split(",") if args.only else list(endings(args.at))
     rows = []
     for name in names:
         for attempt in range(3):
             with tempfile.TemporaryDirectory() as tmp:
-                result = one_run(name, Path(tmp))
+                result = one_run(name, Path(tmp), args.at)
             if not result["watchdog_first"] or name == "watchdog":
                 break
             print(f"{name}: try {attempt + 1} ended before the event ({result['named'][:100]}); again", flush=True)

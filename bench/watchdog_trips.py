@@ -88,7 +88,7 @@ def main() -> None:
             before_src = Path(tmp) / "src"
             archive = subprocess.run(["git", "-C", str(REPO), "archive", args.before], capture_output=True, check=True).stdout
             subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-            (Path(tmp) / "fmus").mkdir()
+            (Path(tmp) / "fmus").mkdir(exist_ok=True)
             setups = {"before": _env(before_src, Path(tmp) / "fmus"), "after": _env(REPO / "src", None)}
             for name, env in setups.items():  # build the FMUs first, not inside a timed run
                 subprocess.run([PYTHON, "-c", "from pendulab.fmu.build import ensure_fmu\n"

@@ -280,6 +280,8 @@ CASES = [
     ("build-fmus --out {a_file}", "is a file"),
     ("build-fmus --out " + RO, "cannot write"),
     ("build-fmus Plant9", "unknown FMU"),
+    ("docs --frobnicate", "--frobnicate"),
+    ("docs --out " + RO, "--out"),
     ("frobnicate", "frobnicate"),
     ("--nonsense", "nonsense"),
 ]

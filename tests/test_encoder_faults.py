@@ -68,7 +68,7 @@ def _rig_time(lines: list[str], fragment: str) -> float:
 @pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")
 @pytest.mark.parametrize("fault, which", [("--frozen-encoder", "pendulum"), ("--dead-encoder", "cart")])
 def test_lab_stops_the_motor_on_an_encoder_fault_from_the_emulator(tmp_path, fault, which):
-    for attempt in range(3):
+    for attempt in range(2):
         with emulator("--raise-after", "0.3", fault, f"{which},2") as emu:
             result = lab("--port", emu.port, "--demo", "--delay", "3", "--stop-time", "8", "--out", str(tmp_path / f"run{attempt}"),
                          stdin="s\n", timeout=60)
