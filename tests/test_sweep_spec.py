@@ -77,6 +77,15 @@ def test_the_calibration_spread_draws_the_friction(tmp_path):
     assert set(draws) == {"F1", "F2", "v2", "B", "Beq"}  # v1's spread is 0: kept at its value
     assert abs(np.mean(draws["F1"]) - 1.2) < 0.03 and abs(np.std(draws["F1"]) - 0.1) < 0.02
     assert abs(np.mean(draws["Beq"]) - 4.3) < 0.06  # the preset's Beq, not fitted in this file
+    assert parse_sweep_spec(spec.to_toml()).digest() == spec.digest()  # what sweep.toml records reads back
+
+
+def test_a_spec_written_as_toml_reads_back_as_the_same_sweep():
+    for text in (ISSUE_SPEC, '[controller]\ndemo = true\n[grid]\n"compensators.0.zeros.0" = [-15, -17]\n[sweep]\ntimeout = 5'):
+        spec = parse_sweep_spec(text)
+        again = parse_sweep_spec(spec.to_toml())
+        assert again.digest() == spec.digest() and again.timeout == spec.timeout
+        assert again.points() == spec.points() and again.draws() == spec.draws()
 
 
 BAD = {

@@ -137,7 +137,7 @@ def sweep(
         if announce is not None:
             announce(f"sweep: {spec.n_points} controller point{'s' if spec.n_points != 1 else ''} x {spec.n_samples} plant "
                      f"sample{'s' if spec.n_samples != 1 else ''} = {spec.n_runs} runs of {spec.run['stop_time']:g} s on {engine.describe()}")
-        store = ResultStore.open(out, spec, text or f"# {spec.source}\n", resume, overwrite)
+        store = ResultStore.open(out, spec, text or f"# {spec.source}\n{spec.to_toml()}", resume, overwrite)
         todo = [i for i in range(spec.n_runs) if i not in store.done]
         count = getattr(engine, "workers", None) or max(1, len(engine.client.scheduler_info().get("workers", {})))
         balanced = 0

@@ -208,6 +208,35 @@ class SweepSpec:
         return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     # ---------------------------------------------------------------- points and samples
+    def to_toml(self) -> str:
+        """The spec as TOML text that parses back to the same sweep (same :meth:`digest`).
+
+        Examples
+        --------
+        >>> spec = parse_sweep_spec('[controller.pid]\\nkp = [600, 750]\\nki = 6\\nkd = 5\\n[uncertainty]\\nsamples = 2\\nF1 = 1.5')
+        >>> parse_sweep_spec(spec.to_toml()).digest() == spec.digest()
+        True
+        """
+        run = {k: v for k, v in self.run.items() if not k.startswith("_") and v is not None and v != {}}
+        lines = ["[run]", *(f"{k} = {_toml(v)}" for k, v in run.items()), ""]
+        axes = {a.name: list(a.values) for a in self.axes}
+        if "pid" in self.controller:
+            pid = {k: axes.get(k, v) for k, v in self.controller["pid"].items()}
+            lines += ["[controller.pid]", *(f"{k} = {_toml(v)}" for k, v in pid.items()), ""]
+        else:
+            lines += ["[controller]", f"kernel = {_toml(self.controller['kernel'])}",
+                      f"compensators = {_toml(self.controller['compensators'])}", ""]
+            if axes:
+                lines += ["[grid]", *(f"{json.dumps(k)} = {_toml(v)}" for k, v in axes.items()), ""]
+        if self.samples:
+            lines += ["[uncertainty]", f"samples = {self.samples}", f"seed = {self.seed}"]
+            for name, dist in self.uncertainty.items():
+                value = dist.values[0] if dist.kind == "fixed" else {dist.kind: list(dist.values)}
+                lines.append(f"{name} = {_toml(value)}")
+            lines.append("")
+        lines += ["[sweep]", f"timeout = {self.timeout!r}", f"batch = {self.batch}", f"save_every = {self.save_every!r}", ""]
+        return "\n".join(lines)
+
     def points(self) -> list[dict[str, float]]:
         """Every grid point (``{axis name: value}``), the last axis varying fastest."""
         return [dict(zip((a.name for a in self.axes), combo)) for combo in itertools.product(*(a.values for a in self.axes))]
@@ -256,6 +285,21 @@ class SweepSpec:
         for name, value in point.items():
             _set_number(data, name, value)
         return Controller.from_dict(data)
+
+
+def _toml(value: Any) -> str:
+    """One TOML value (numbers, strings, booleans, lists, inline tables)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
 def _plain(value: Any, name: str) -> float | int:
