@@ -81,8 +81,9 @@ def test_cc_is_honoured_and_a_failing_compiler_falls_back(cache, monkeypatch, tm
     record = tmp_path / "calls.txt"
     monkeypatch.setenv("CC", str(fake_compiler(tmp_path / "bin", record)))
     assert native.shared_library(SOURCE, "answer") is None
-    with pytest.raises(native.CompileFailed, match="compiling answer"):
+    with pytest.raises(native.CompileFailed, match="compiling answer") as info:
         native.shared_library(SOURCE, "answer", feature="the answer")
+    assert str(info.value).splitlines()[0].endswith("failed: exit status 1"), "the first line says what went wrong"
     assert len(record.read_text().splitlines()) == 2 and "-shared" in record.read_text()
 
 

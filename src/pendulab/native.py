@@ -149,7 +149,9 @@ def compile_shared(
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise CompileFailed(f"compiling {output.name} failed: {' '.join(command)}: {exc}") from None
     if result.returncode != 0:
-        raise CompileFailed(f"compiling {output.name} failed:\n{' '.join(command)}\n{result.stderr}")
+        first = next((line for line in result.stderr.splitlines() if "error" in line.lower()), "") or \
+            (result.stderr.strip().splitlines() or [f"exit status {result.returncode}"])[0]
+        raise CompileFailed(f"compiling {output.name} with {compiler} failed: {first.strip()}\n{' '.join(command)}\n{result.stderr}")
 
 
 def shared_library(
