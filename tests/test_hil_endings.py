@@ -183,17 +183,25 @@ def test_sigterm_ends_calibrate_with_the_motor_off_and_the_log_kept(tmp_path):
 
 
 def test_sigterm_ends_lab_as_the_end_key_does(tmp_path):
-    out_dir = tmp_path / "run"
-    with emulator("--raise-after", "0.3") as emu:
-        proc = lab_process("--port", emu.port, "--demo", "--delay", DELAY, "--out", str(out_dir))
-        proc.stdin.write("s\n")  # type: ignore[union-attr]
-        proc.stdin.flush()  # type: ignore[union-attr]
-        emu.wait_for("hand released", timeout=30)
-        time.sleep(0.5)
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=60)
-        emu_text = emu.text
-    assert proc.returncode == 128 + signal.SIGTERM, out + err
+    runs = iter(range(3))
+
+    def scenario():
+        out_dir = tmp_path / f"run{next(runs)}"
+        with emulator("--raise-after", "0.3") as emu:
+            proc = lab_process("--port", emu.port, "--demo", "--delay", DELAY, "--out", str(out_dir))
+            proc.stdin.write("s\n")  # type: ignore[union-attr]
+            proc.stdin.flush()  # type: ignore[union-attr]
+            deadline = time.monotonic() + 30
+            while "hand released" not in emu.text and proc.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.02)
+            time.sleep(0.5)
+            proc.send_signal(signal.SIGTERM)
+            out, err = proc.communicate(timeout=60)
+            emu_text = emu.text
+        return out, err, proc.returncode, emu_text, out_dir
+
+    out, err, status, emu_text, out_dir = _on_a_steady_host(scenario)
+    assert status == 128 + signal.SIGTERM, out + err
     assert "motor off; session ended: ended by SIGTERM" in out, out
     assert "motor off" in emu_text
     for name in ("rig_log.csv", "run.mat", "run.csv", "metrics.json", "timing.json"):
