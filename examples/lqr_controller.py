@@ -64,11 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     cut = result.metrics["safety_cut_time_s"]
+    print("\n".join(result.verdict.lines()))  # the verdict of pendulab.analysis.verdict, as 'simulate' prints it
     print(f"max |alpha| = {np.degrees(np.abs(columns['alpha']).max()):.2f} deg, "
           f"max |x| = {100 * np.abs(columns['x']).max():.1f} cm, final x = {1000 * columns['x'][-1]:.1f} mm, "
           f"max |V| = {np.abs(columns['voltage_command']).max():.2f} V")
     print("supervisor:", f"tripped at {cut:.3f} s" if cut is not None else "never tripped")
-    print("stable:", result.metrics["stable"])
     print("results:", ", ".join(str(p) for p in paths.values()))
     return 0
 

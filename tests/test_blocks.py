@@ -157,6 +157,8 @@ def test_lqr_balances_the_long_pendulum_through_the_poke(lqr_run, long_params: P
     assert lqr_run.metrics["safety_cut_time_s"] is None
     assert np.all(c["supervisor_state"] == RUNNING)
     assert lqr_run.metrics["stable"] is True
+    # The worked example is a working design: balanced with no warning (issue 24).
+    assert lqr_run.verdict.clean, lqr_run.verdict.lines()
     assert np.all(np.isfinite(c["voltage_command"]))
 
 

@@ -125,7 +125,7 @@ def cli_run(tmp_path_factory, loop_fmus) -> Path:
         capture_output=True, text=True, timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    assert "STABLE" in result.stdout
+    assert result.stdout.startswith("BALANCED for 2 s")
     return out
 
 
@@ -162,5 +162,8 @@ def test_run_csv_and_metrics_match_run_mat(cli_run):
     for name in COLUMNS:
         np.testing.assert_allclose(columns[name], mat[name][:, 0], rtol=1e-12, atol=1e-15, err_msg=name)
     metrics = json.loads((cli_run / "metrics.json").read_text())
-    assert set(metrics) == METRIC_KEYS
+    # SPEC §7's keys, and the reasons for the ones not reported, the cut's reason and the verdict (issue 24).
+    assert set(metrics) == METRIC_KEYS | {"not_reported", "safety_cut_reason", "verdict"}
+    assert metrics["verdict"]["outcome"] == "balanced" and metrics["safety_cut_reason"] is None
+    np.testing.assert_array_equal(columns["trip_reason"], 0.0)  # the supervisor's reason column: no trip
     assert metrics["stable"] is True and metrics["safety_cut_time_s"] is None

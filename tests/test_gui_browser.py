@@ -107,7 +107,7 @@ def run_and_wait(driver) -> Path:
     wait(driver, lambda d: len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) > before, 10)
     wait(driver, lambda d: "results in" in status(d, "run-status")[1] or "error" in status(d, "run-status")[0], 60)
     cls, text = status(driver, "run-status")
-    assert "ok" in cls, text
+    assert "results in" in text, text
     return Path(text.split("results in ", 1)[1].strip())
 
 
@@ -173,12 +173,19 @@ def test_controller_mistake_fix_run_metrics_overlay_download(gui):
         assert raw == value, key  # the page holds the run's own numbers ...
         if isinstance(value, bool):
             assert text == ("yes" if value else "no")
-        elif value is None:
-            assert text == "n/a"
+        elif value is None:  # with a * and the reason beside it when the metric is not reported
+            assert text == ("n/a *" if key in metrics["not_reported"] else "n/a"), (key, text)
+        elif key == "verdict":
+            assert text.startswith(value["outcome"])
+        elif isinstance(value, str):
+            assert text == value
         else:  # ... and shows them to 4 significant digits
             assert math.isclose(float(text), value, rel_tol=6e-4, abs_tol=1e-12), (key, text, value)
         checked += 1
     assert checked >= 8 and metrics["stable"] is True
+    # The verdict box: this demo run is balanced with no warning, the only verdict shown in green.
+    cls, text = status(d, "run-status")
+    assert metrics["verdict"]["clean"] and "ok" in cls and text.startswith(metrics["verdict"]["headline"])
 
     # A second run with a harder poke: both overlaid, aligned at the poke, side by side in the table.
     type_into(d, "poke-mag", "150")
@@ -282,10 +289,18 @@ def test_two_tabs_do_not_mix(gui):
     d.find_element(By.ID, "mode-pid").click()
     assert not d.find_element(By.ID, "kernel-entry").is_displayed()
     wait(d, lambda d: "Gc(s) =" in status(d, "controller-status")[1], 10)
-    assert status(d, "controller-status")[1].startswith(f"Gc(s) = {__import__('pendulab.control', fromlist=['Controller']).Controller.pid(40, 5, 4)}")
-    # The linear view follows the controller: PID cannot stabilize this plant (its zero at s = 0 and
-    # one unstable pole need an unstable controller), the demo controller does.
+    from pendulab.control import Controller, parse_compensator
+
+    # The prefilled PID is one that balances: in series with 1/(s - 4) (the form says why a PID needs it).
+    prefilled = Controller([*Controller.pid(300, 100, 100).factors, parse_compensator("none;4")])
+    assert status(d, "controller-status")[1].startswith(f"Gc(s) = {prefilled}")
+    assert "can never" in d.find_element(By.ID, "pid-note").text
+    wait(d, lambda d: "closed loop stable" in d.find_element(By.ID, "linear-verdict").text, 30)
+    # The PID alone: the linear view says, before any run, that no gain can balance it, and why.
+    d.execute_script("const e = document.getElementById('pid-pole'); e.value = ''; e.dispatchEvent(new Event('input'));")
     wait(d, lambda d: "closed loop UNSTABLE" in d.find_element(By.ID, "linear-verdict").text, 30)
+    wait(d, lambda d: "no gain can balance the pendulum" in d.find_element(By.ID, "linear-never").text, 30)
+    assert "den_G(0)" in d.find_element(By.ID, "linear-never").text
     shot(gui, "09-pid-entry")
     d.find_element(By.ID, "demo").click()
     wait(d, lambda d: "(s + 80)^2" in status(d, "controller-status")[1], 10)
@@ -319,3 +334,61 @@ def test_two_tabs_do_not_mix(gui):
     shot(gui, "10-second-tab")
     d.switch_to.window(first_tab)
     assert len(d.find_elements(By.CSS_SELECTOR, "#runs tbody tr")) == before + 1
+
+
+def test_fresh_form_lead_verdict_form_words_and_reload(gui):
+    """Issue 24: empty fields are empty, errors use the form's words, a zero poke is refused, the lead
+    controller's verdict names its warnings in amber, and the runs survive a reload."""
+    d = gui["driver"]
+    d.switch_to.new_window("tab")
+    d.get(gui["url"])
+    wait(d, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-drawn") == "1", 10)
+    for element_id in ("k-zeros", "k-poles", "k-gain"):  # no grey values that look like a controller
+        field = d.find_element(By.ID, element_id)
+        assert field.get_attribute("value") == "" and not field.get_attribute("placeholder"), element_id
+    d.find_element(By.ID, "add-comp").click()
+    assert not d.find_elements(By.CSS_SELECTOR, "tr.comp")[-1].find_element(By.CLASS_NAME, "c-gain").get_attribute("placeholder")
+    d.find_element(By.CSS_SELECTOR, "tr.comp .remove").click()
+
+    enter_kernel(d, "-6,-12", "6.4,-90", "40000")  # the issue's lead controller
+    wait(d, lambda d: "ok" in status(d, "controller-status")[0], 10)
+    # Form errors in the form's words, not the command line's.
+    type_into(d, "poke-mag", "abc")
+    d.find_element(By.ID, "run").click()
+    wait(d, lambda d: "error" in status(d, "run-status")[0], 10)
+    text = status(d, "run-status")[1]
+    assert text.startswith("poke magnitude 'abc' is not a number") and "--" not in text, text
+    type_into(d, "poke-mag", "0")  # no disturbance: refused, it would test nothing
+    d.find_element(By.ID, "run").click()
+    wait(d, lambda d: "poke magnitude is 0" in status(d, "run-status")[1], 10)
+    assert "error" in status(d, "run-status")[0] and "--" not in status(d, "run-status")[1]
+    type_into(d, "stop-time", "-1")
+    type_into(d, "poke-mag", "50")
+    d.find_element(By.ID, "run").click()
+    wait(d, lambda d: status(d, "run-status")[1].startswith("stop time -1"), 10)
+    type_into(d, "stop-time", "5")
+
+    folder = run_and_wait(d)
+    metrics = json.loads((folder / "metrics.json").read_text())
+    cls, text = status(d, "run-status")
+    headline = metrics["verdict"]["headline"]
+    assert text.startswith(headline) and headline.startswith("BALANCED for 5 s, but the voltage chatters")
+    assert "warn" in cls and "ok" not in cls.split()  # amber: balanced, with warnings
+    for kind in ("saturation", "chattering", "drift"):
+        assert f"warning: {kind}:" in text
+    colour = d.execute_script("return getComputedStyle(document.getElementById('run-status')).borderLeftColor")
+    assert colour == "rgb(221, 136, 0)", colour  # #d80, not the green of a clean verdict
+    run_id = current_run_id(d)
+    cell = d.find_element(By.CSS_SELECTOR, f'#metrics td[data-run="{run_id}"][data-key="verdict"]')
+    assert cell.get_attribute("class") == "warn" and cell.text.startswith("balanced (chattering, saturation, drift")
+    peak = d.find_element(By.CSS_SELECTOR, f'#metrics td[data-run="{run_id}"][data-key="peak_time_s"]')
+    assert peak.text == "n/a *" and "chatters" in peak.get_attribute("title")
+    assert "chatters" in d.find_element(By.ID, "metrics-notes").text
+    shot(gui, "11-lead-controller-warnings")
+
+    # A reload keeps the tab's runs (and their data).
+    d.refresh()
+    wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, f'#runs tr[data-run="{run_id}"]'), 20)
+    wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, f'#metrics td[data-run="{run_id}"]'), 20)
+    assert page_metrics(d, run_id)["verdict"][1]["headline"] == headline
+    shot(gui, "12-after-reload")

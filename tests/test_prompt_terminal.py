@@ -43,7 +43,7 @@ def test_prompt_to_a_finished_run(tmp_path, plant_fmu):
     answer(child, "Poke magnitude in rad/s^2 [50]: ", "")
     answer(child, "Poke duration in s [0.005]: ", "")
     answer(child, "Poke start time in s [1]: ", "")
-    child.expect("STABLE: the pendulum stayed up")
+    child.expect("BALANCED for 3 s")
     child.expect(pexpect.EOF)
     child.close()
     assert child.exitstatus == 0

@@ -38,11 +38,15 @@ class SimulationResult:
         ``t``, ``x``, ``xdot``, ``alpha``, ``alpha_measured``, ``tip``, ``voltage_command``, ``voltage``,
         ``supervisor_state`` (and any signals recorded on request, under their full names).
     metrics : dict
-        What ``metrics.json`` holds (:func:`pendulab.analysis.metrics.compute_metrics`).
+        What ``metrics.json`` holds (:func:`pendulab.analysis.verdict.assess`: the response metrics where
+        they mean something, the cut's reason and the verdict).
     meta : dict
         What the ``meta`` struct of ``run.mat`` holds.
     spec : RunSpec or None
         The run's description.
+    verdict : pendulab.analysis.verdict.Verdict or None
+        Balanced, cut or fell, and the warnings (:mod:`pendulab.analysis.verdict`); the first line
+        ``pendulab simulate`` prints is ``verdict.headline()``.
 
     Examples
     --------
@@ -56,6 +60,7 @@ class SimulationResult:
     metrics: dict[str, Any]
     meta: dict[str, Any] = field(default_factory=dict)
     spec: RunSpec | None = None
+    verdict: Any = None
 
     def write(self, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
         """Write ``run.mat``, ``run.csv`` and ``metrics.json`` into ``out_dir``; returns their paths by kind."""
@@ -114,7 +119,7 @@ def simulate(
     >>> float(result.columns["t"][-1]), result.metrics["peak_time_s"] < 0.1
     (1.5, True)
     """
-    from pendulab.analysis.metrics import compute_metrics
+    from pendulab.analysis.verdict import Limits, assess
     from pendulab.cosim.master import Master, SimulationError
     from pendulab.cosim.pendulum import RECORDED, collect_columns
 
@@ -164,9 +169,10 @@ def simulate(
     # A swing-up run's response is measured from the catch on (the hand-over is its disturbance).
     start = moments.get("catch_time_s") if spec.supervisor.swing_up else None
     first = 0 if start is None else int(np.searchsorted(columns["t"], start))
-    metrics = compute_metrics(
-        columns["t"][first:], columns["alpha"][first:], poke_start=params.poke_start if start is None else start,
-        q_alpha=params.q_alpha, xdot=columns["xdot"][first:], safety_cut_time=safety_cut,
+    metrics, verdict = assess(
+        {name: values[first:] for name, values in columns.items()}, poke_start=params.poke_start if start is None else start,
+        limits=Limits.of(params, spec.supervisor_parameters()), poke=(params.poke_magnitude, params.poke_duration),
+        safety_cut_time=safety_cut, recentre=spec.supervisor.recentre, caught=start is not None,
     )
     metrics.update(moments)
     for name in record:
@@ -176,7 +182,7 @@ def simulate(
         info.update(recentre=spec.supervisor.recentre, swing_up=spec.supervisor.swing_up, start=spec.plant.start,
                     mode_events=mode_events(columns["t"], columns["supervisor_state"], recentring=columns["recentring"]))
     info.update(meta or {})
-    return SimulationResult(columns, metrics, info, spec)
+    return SimulationResult(columns, metrics, info, spec, verdict)
 
 
 class Simulator:

@@ -121,7 +121,9 @@ def compute_metrics(
         ``settling_time_s`` poke start until the angle stays within
         ``max(2 % of the first peak, q_alpha)`` of the final value (and stays there for at least
         the last 10 % of the record); ``final_value_rad`` (mean of the last 10 %; None after a cut or a fall);
-        ``cart_speed_change_m_s`` xdot at the end minus xdot just before the poke;
+        ``cart_speed_change_m_s`` the mean cart speed over the last second (up to a cut) minus its mean
+        over the half second before the poke (a mean over a window is the net movement over it: robust
+        to stick-slip and quantization);
         ``safety_cut_time_s``; ``stable`` (no cut, bounded, and settled or not growing). Undeterminable values are
         None.
 
@@ -153,7 +155,7 @@ def compute_metrics(
     metrics: dict[str, Any] = {key: None for key in METRIC_KEYS}
     metrics["safety_cut_time_s"] = cut
     if xdot is not None:
-        metrics["cart_speed_change_m_s"] = _speed_change(t, _as_1d("xdot", xdot), poke_start)
+        metrics["cart_speed_change_m_s"] = _speed_change(t, _as_1d("xdot", xdot), poke_start, cut)
 
     initial = _initial_value(t, alpha, poke_start)
 
@@ -354,15 +356,39 @@ def _initial_value(t: np.ndarray, alpha: np.ndarray, poke_start: float) -> float
     return float(np.median(values)) if values.size else math.nan
 
 
-def _speed_change(t: np.ndarray, xdot: np.ndarray, poke_start: float) -> float | None:
+#: The cart speed change compares mean speeds over windows this long (s): the last one before the
+#: end (or the cut), and the one before the poke. A mean over a window is the cart's net movement
+#: divided by the window, so stick-slip's jerks and the speed's quantization noise average out.
+SPEED_WINDOW = 1.0
+#: The window before the poke (the pendulum balanced at rest; a shorter one if the run starts later).
+SPEED_WINDOW_BEFORE = 0.5
+
+
+def _speed_change(t: np.ndarray, xdot: np.ndarray, poke_start: float, cut: float | None = None) -> float | None:
+    """Mean cart speed over the last :data:`SPEED_WINDOW` s (up to the cut) minus its mean over the
+    :data:`SPEED_WINDOW_BEFORE` s before the poke (m/s)."""
     if xdot.size != t.size:
         raise UserError(f"xdot has {xdot.size} samples but t has {t.size}; give both at the same times")
-    before = np.flatnonzero(t < poke_start)
-    start = xdot[before[-1]] if before.size else xdot[0]
-    end = xdot[np.isfinite(xdot)]
-    if not math.isfinite(start) or end.size == 0:
+    finite = np.isfinite(xdot)
+    end = t[finite][-1] if finite.any() else t[-1]
+    if cut is not None:
+        end = min(end, cut)
+    end = max(end, poke_start)
+
+    def mean(lo: float, hi: float) -> float:
+        inside = finite & (t >= lo) & (t <= hi)
+        if inside.sum() >= 2:
+            tt, v = t[inside], xdot[inside]
+            return float(np.sum(0.5 * (v[1:] + v[:-1]) * np.diff(tt)) / (tt[-1] - tt[0]))  # trapezoid mean
+        return float(xdot[inside][0]) if inside.any() else math.nan
+
+    before = mean(poke_start - SPEED_WINDOW_BEFORE, poke_start - 1e-12) if t[0] < poke_start else math.nan
+    if not math.isfinite(before):
+        before = float(xdot[0]) if finite[0] else math.nan
+    after = mean(max(poke_start, end - SPEED_WINDOW), end)
+    if not (math.isfinite(before) and math.isfinite(after)):
         return None
-    return float(end[-1] - start)
+    return after - before
 
 
 def _lobes(t: np.ndarray, dev: np.ndarray, h: float) -> list[_Lobe]:

@@ -27,6 +27,7 @@ from matplotlib.figure import Figure
 
 from pendulab.analysis.results import atomic_write
 from pendulab.errors import UserError
+from pendulab.fmu.models.supervisor.config import TRIP_REASONS
 
 DPI = 110
 
@@ -114,6 +115,32 @@ DEFAULT_VOLTAGE_LIMIT = 10.0
 RESPONSE_WINDOW = 0.5
 #: supervisor_state code of a latched trip (pendulab.fmu.models.supervisor.config.TRIPPED).
 _TRIPPED = 4
+#: Saturated stretches closer than this (s) are shaded as one (a chattering voltage has hundreds).
+SATURATION_GAP = 0.02
+
+
+def saturated_spans(t: np.ndarray, voltage: np.ndarray, limit: float, gap: float = SATURATION_GAP) -> list[tuple[float, float]]:
+    """``(start, end)`` times where ``|voltage|`` is at ``limit``, stretches less than ``gap`` apart merged.
+
+    Examples
+    --------
+    >>> t = np.arange(10) * 0.01
+    >>> saturated_spans(t, np.array([0, 10, 10, 0, 0, 0, -10, 0, 0, 0.0]), 10.0)
+    [(0.01, 0.02), (0.06, 0.06)]
+    """
+    at = np.abs(np.nan_to_num(np.asarray(voltage, dtype=float))) >= limit * (1 - 1e-6)
+    if not at.any():
+        return []
+    edges = np.flatnonzero(np.diff(at.astype(np.int8)))
+    starts = np.concatenate(([0] if at[0] else [], edges[~at[edges]] + 1)).astype(int)
+    ends = np.concatenate((edges[at[edges]], [at.size - 1] if at[-1] else [])).astype(int)
+    spans: list[tuple[float, float]] = []
+    for i, j in zip(starts, ends):
+        if spans and t[i] - spans[-1][1] < gap:
+            spans[-1] = (spans[-1][0], float(t[j]))
+        else:
+            spans.append((float(t[i]), float(t[j])))
+    return spans
 
 
 def plot_run(
@@ -133,7 +160,9 @@ def plot_run(
     missing are left out (a panel with none shows a note).
 
     * The poke and the safety cut are marked with vertical lines on every panel. Without
-      ``safety_cut_time`` the cut is read from the ``supervisor_state`` column (first ``tripped``).
+      ``safety_cut_time`` the cut is read from the ``supervisor_state`` column (first ``tripped``);
+      its reason (angle, track, ...) from the ``trip_reason`` column is in the cut's label.
+    * The stretches where the applied voltage is at the amplifier's limit are shaded on every panel.
     * The *response* panel is the angle from the poke to :data:`RESPONSE_WINDOW` after it (the old
       lab's figure); without a poke it is the first half second.
     * The voltage panel is limited to the amplifier's range (``±voltage_limit`` with a margin): a
@@ -185,7 +214,11 @@ def run_figures(
         tripped = np.flatnonzero(cols["supervisor_state"] == _TRIPPED)
         safety_cut_time = float(t[tripped[0]]) if tripped.size else None
     limit = float(voltage_limit) if voltage_limit is not None else DEFAULT_VOLTAGE_LIMIT
-    marks = [(poke_start, "poke", "C3", "--"), (safety_cut_time, "safety cut", "k", ":")]
+    cut_label = "safety cut"
+    if "trip_reason" in cols and cols["trip_reason"].size == t.size and np.any(cols["trip_reason"] > 0):
+        code = int(cols["trip_reason"][np.flatnonzero(cols["trip_reason"] > 0)[0]])
+        cut_label = f"safety cut: {TRIP_REASONS.get(code, 'reason ' + str(code))}"
+    marks = [(poke_start, "poke", "C3", "--"), (safety_cut_time, cut_label, "k", ":")]
     spans: list[list[float]] = []
     if "supervisor_state" in cols and cols["supervisor_state"].size == t.size:
         # The supervisor's modes (issue 21): swing start and catches as lines, re-centring as shaded spans.
@@ -195,6 +228,8 @@ def run_figures(
         marks.append((moments["swing_start_s"], "swing-up starts", "C2", "-."))
         marks += [(when, "catch" if k == 0 else None, "C4", "-") for k, when in enumerate(moments["catch_times_s"])]
         spans = moments.get("recentre_intervals_s", [])
+    if "voltage" in cols and cols["voltage"].size == t.size:
+        marks += [(span, f"voltage at ±{limit:g} V", "C3", "span") for span in saturated_spans(t, cols["voltage"], limit)]
     start = poke_start if poke_start is not None else (float(t[0]) if t.size else 0.0)
     seesaw = "theta" in cols and "alpha" not in cols
     angle = _TILT_PANEL if seesaw else _PANELS[0]
@@ -281,8 +316,13 @@ def _draw_panel(ax: Axes, panel: _Panel, t: np.ndarray, cols: Mapping[str, np.nd
     if not drawn:
         ax.text(0.5, 0.5, "not logged in this run", transform=ax.transAxes, ha="center", va="center", color="0.5")
     lo, hi = ax.get_xlim() if panel.own_xlim else (t[0], t[-1]) if t.size else (0.0, 1.0)
+    spanned = False
     for when, label, color, style in marks:
-        if when is not None and (not panel.own_xlim or lo <= when <= hi):
+        if style == "span":  # a saturated stretch: shaded, labelled once
+            if not panel.own_xlim or (when[1] >= lo and when[0] <= hi):
+                ax.axvspan(when[0], when[1], color=color, alpha=0.15, lw=0, label=None if spanned else label)
+                spanned = True
+        elif when is not None and (not panel.own_xlim or lo <= when <= hi):
             ax.axvline(when, color=color, ls=style, lw=1.0, label=label)
     ax.set_ylabel(panel.ylabel)
     ax.grid(True, alpha=0.3)

@@ -35,7 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  pendulab lab --port COM3 --demo\n"
             "  pendulab lab --port /dev/ttyACM0 --controller my_controller.toml --plot --compare\n"
-            "  pendulab lab --port socket://labpc7:5555 --pid 40,5,4 --stop-time 30"
+            "  pendulab lab --port socket://labpc7:5555 --pid 300,100,100 --compensator 'none;4' --stop-time 30"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

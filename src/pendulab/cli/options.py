@@ -37,9 +37,11 @@ def add_controller_options(parser: argparse.ArgumentParser) -> None:
     given.add_argument("--gain", metavar="K", help="kernel gain")
     given.add_argument("--compensator", action="append", default=[], metavar="ZEROS;POLES[;GAIN]",
                        help="add a compensator (repeatable), e.g. '-2;-20'")
-    given.add_argument("--pid", metavar="KP,KI,KD", help="PID controller Kp + Ki/(s+1/Ti) + Kd*wf*s/(s+wf)")
+    given.add_argument("--pid", metavar="KP,KI,KD",
+                       help="PID controller Kp + Ki/(s+1/Ti) + Kd*wf*s/(s+wf) as the kernel; alone it cannot balance the pendulum, "
+                            "in series with an unstable pole it can: --pid 300,100,100 --compensator 'none;4'")
     given.add_argument("--controller", metavar="FILE", help="controller file (TOML or JSON)")
-    given.add_argument("--demo", action="store_true", help="a good default controller for the chosen pendulum")
+    given.add_argument("--demo", action="store_true", help="the demo controller: one design that balances both pendulums")
 
 
 def controller_from_args(args: argparse.Namespace) -> Any | None:

@@ -34,11 +34,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "run.mat, run.csv and metrics.json. With no controller given on a terminal, asks for one."
         ),
         epilog=(
-            "examples:\n"
+            "examples (the first four balance both pendulums with no warning):\n"
             "  pendulab simulate --demo\n"
-            "  pendulab simulate --zeros=-3,-6 --poles=-30,-0.1 --gain 80 --plot\n"
+            "  pendulab simulate --zeros=-6 --poles=6.4 --gain 45000 --compensator '-16;-80' --compensator ';-80' --plot\n"
             "  pendulab simulate --controller my_controller.toml --pendulum short --animate\n"
-            "  pendulab simulate --pid 40,5,4 --poke 220,0.005,1\n"
+            "  pendulab simulate --pid 300,100,100 --compensator 'none;4'   (a PID alone cannot balance: see README)\n"
             "  pendulab simulate --demo --poke 220,0.005,1 --stop-time 60 --delay 2 --recentre\n"
             "  pendulab simulate --demo --start hanging --swing-up --stop-time 20 --plot\n"
             "  pendulab simulate --plant seesaw --demo --plot"
@@ -81,6 +81,20 @@ def parse_poke(text: str) -> tuple[float, float, float]:
     return dataclasses.astuple(Poke.parse(text))  # type: ignore[return-value]
 
 
+def check_poke_disturbs(poke: tuple[float, float, float], magnitude: str = "--poke magnitude", duration: str = "--poke duration") -> None:
+    """Refuse a poke that disturbs nothing: with no disturbance any controller "stays up" (UserError).
+
+    ``magnitude`` and ``duration`` name the fields in the message (the GUI passes its form's words). A
+    :class:`pendulab.spec.RunSpec` with such a poke still runs in Python; its verdict is ``not tested``.
+    """
+    if poke[0] == 0:
+        raise UserError(f"{magnitude} is 0: a poke of size 0 disturbs nothing, so any controller would stay up and the run "
+                        "would test nothing; give a magnitude such as 50 rad/s^2 (the default) or 220 (the lab's)")
+    if poke[1] == 0:
+        raise UserError(f"{duration} is 0 s: a poke of length 0 disturbs nothing, so the run would test nothing; "
+                        "give a duration such as 0.005 s (the default)")
+
+
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """The run the options describe (asking on a terminal when no controller is given), validated."""
     from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
@@ -90,6 +104,9 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     poke = Poke.parse(args.poke) if args.poke else None
     if args.plant == "seesaw":
         return _seesaw_spec(args, timing, poke)
+    if args.pendulum == "none":
+        raise UserError("simulate needs a pendulum: --pendulum none is the cart alone, which has nothing to balance "
+                        "(for the cart alone use 'pendulab calibrate --virtual'); choose --pendulum long or short")
     controller = controller_from_args(args)
     spec = RunSpec(controller, plant=plant_from_args(args, start=args.start), poke=poke or Poke(), timing=timing,
                    quantization=Quantization(enabled=not args.no_quantization),
@@ -103,6 +120,7 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
         # Flags given on the command line win over the answers' defaults.
         plant = dataclasses.replace(asked.plant, calibration=asked.plant.calibration or spec.plant.calibration)
         spec = asked.replace(plant=plant, poke=poke or asked.poke)
+    check_poke_disturbs(dataclasses.astuple(spec.poke))  # with no disturbance the run would test nothing
     return spec.validate()
 
 
@@ -147,6 +165,16 @@ def run(args: argparse.Namespace) -> int:
 
     from pendulab.cosim.master import SimulationError
     from pendulab.simulation import simulate
+
+    prediction = None
+    if not seesaw and spec.controller.transfer_function is not None:
+        # The linear check comes before the simulation: a controller that can never balance is named now.
+        from pendulab.control.loop import linear_prediction
+
+        timing = spec.timing
+        prediction = linear_prediction(spec.controller.transfer_function, params, h=timing.step, method=timing.method, delay=timing.delay)
+        if prediction.never:
+            print(f"before simulating: {prediction.never}", file=sys.stderr)
 
     def progress(t: float) -> None:
         if sys.stderr.isatty():
@@ -195,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
         system = pendulum_system(params, discretize(spec.controller.transfer_function, h=timing.step, method=timing.method).to_parameters(),
                                  step=timing.step, delay=timing.delay, plant=args.ssp)
         written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=timing.stop_time))
-    _print_summary(result, out_dir, written, time.perf_counter() - started)
+    _print_summary(result, prediction, out_dir, written, time.perf_counter() - started)
     if args.robust:
         _robust(args, spec, out_dir)
     return 0
@@ -229,31 +257,47 @@ def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
     return f"{value:.{digits}g}{unit}"
 
 
-def _print_summary(result: Any, out_dir: Path, written: list[Path], elapsed: float) -> None:
+def _metric_line(label: str, m: dict[str, Any], key: str, unit: str) -> str:
+    """``  label   value`` or ``  label   n/a (why it is not reported)``."""
+    value = m.get(key)
+    why = (m.get("not_reported") or {}).get(key) if value is None else None
+    return f"  {label:<19} {_fmt(value, unit)}" + (f" ({why})" if why else "")
+
+
+def _print_summary(result: Any, prediction: Any, out_dir: Path, written: list[Path], elapsed: float) -> None:
     m = result.metrics
-    stayed = "the seesaw stayed level" if result.meta.get("plant") == "seesaw" else "the pendulum stayed up"
-    verdict = f"STABLE: {stayed}" if m.get("stable") else "NOT STABLE"
-    if m.get("safety_cut_time_s") is not None:
-        verdict += f" (safety cut at t = {m['safety_cut_time_s']:.3f} s)"
-    print(verdict)
+    verdict = result.verdict
+    if verdict is not None:
+        # The first line is the verdict: the outcome and the worst warnings; the warnings follow, one a line.
+        print("\n".join(verdict.lines()))
+    else:  # the seesaw: no verdict of its own yet
+        print("STABLE: the seesaw stayed level" if m.get("stable") else "NOT STABLE"
+              + (f" (safety cut at t = {m['safety_cut_time_s']:.3f} s)" if m.get("safety_cut_time_s") is not None else ""))
+    if prediction is not None and verdict is not None:
+        agrees = prediction.agrees_with(verdict.outcome)
+        print(f"  {prediction.describe()}: {'agrees with' if agrees else 'DISAGREES with'} the simulation"
+              + ("" if agrees else _disagreement(prediction, verdict)))
+        if prediction.never:
+            print(f"  {prediction.never}")
     print(f"  controller          {result.meta['controller']}")
-    print(f"  natural frequency   {_fmt(m.get('natural_frequency_rad_s'), ' rad/s')}")
-    print(f"  peak time           {_fmt(m.get('peak_time_s'), ' s')}")
+    print(_metric_line("natural frequency", m, "natural_frequency_rad_s", " rad/s"))
+    print(_metric_line("peak time", m, "peak_time_s", " s"))
     amplitude, frequency = m.get("limit_cycle_amplitude_rad"), m.get("limit_cycle_frequency_rad_s")
     if amplitude is not None and frequency is not None:
-        # A sustained oscillation (stick-slip friction and quantization; the rig does it too): name it
-        # rather than print an overshoot and a settling time that describe it badly.
-        print(
-            f"  limit cycle         ±{math.degrees(amplitude):.2f}° ({amplitude * 1e3:.3g} mrad) at {frequency:.3g} rad/s "
-            "(sustained oscillation from friction and quantization)"
-        )
+        # A sustained oscillation: name it rather than print an overshoot and a settling time that
+        # describe it badly. Its cause is read from the voltage: friction and quantization at small
+        # voltages, or a loop that chatters at the voltage limit.
+        chatters = verdict is not None and any(w.kind == "chattering" for w in verdict.warnings)
+        cause = "the loop chatters at the voltage limit" if chatters else "friction and quantization"
+        print(f"  limit cycle         ±{math.degrees(amplitude):.2f}° ({amplitude * 1e3:.3g} mrad) at {frequency:.3g} rad/s "
+              f"(sustained oscillation: {cause})")
         if m.get("overshoot_percent") is not None:
-            print(f"  overshoot           {_fmt(m.get('overshoot_percent'), ' %')}")
+            print(_metric_line("overshoot", m, "overshoot_percent", " %"))
     else:
-        print(f"  overshoot           {_fmt(m.get('overshoot_percent'), ' %')}")
-        print(f"  settling time       {_fmt(m.get('settling_time_s'), ' s')}")
+        print(_metric_line("overshoot", m, "overshoot_percent", " %"))
+        print(_metric_line("settling time", m, "settling_time_s", " s"))
     print(f"  final angle         {_fmt(m.get('final_value_rad'), ' rad')}")
-    print(f"  cart speed change   {_fmt(m.get('cart_speed_change_m_s'), ' m/s')}")
+    print(f"  cart speed change   {_fmt(m.get('cart_speed_change_m_s'), ' m/s')} (mean speed over the last second minus before the poke)")
     if "max_abs_x_m" in m:
         print(f"  largest |x|         {_fmt(m.get('max_abs_x_m'), ' m')}")
     if result.meta.get("swing_up"):
@@ -264,3 +308,14 @@ def _print_summary(result: Any, out_dir: Path, written: list[Path], elapsed: flo
     for line in result.meta.get("mode_events", []):
         print(f"  {line}")
     print(f"results in {out_dir}/ ({', '.join(p.name for p in written)}) after {elapsed:.1f} s")
+
+
+def _disagreement(prediction: Any, verdict: Any) -> str:
+    """Why the linear loop and the simulation can disagree, in this case's terms."""
+    if not prediction.stable and verdict.outcome == "balanced":
+        return (" (the linear loop is unstable; saturation and friction hold it in a bounded oscillation"
+                + (" that chatters" if any(w.kind == "chattering" for w in verdict.warnings) else "")
+                + ": do not expect the rig to behave like the linear design)")
+    if prediction.stable and verdict.outcome == "cut":
+        return " (the linear loop is stable, but it does not hold the cart: the cut is the track limit)"
+    return " (the nonlinear plant (saturation, friction, the poke's size) leaves the linear model's range)"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 import numpy as np
 
@@ -93,6 +94,19 @@ def run_seesaw(args: argparse.Namespace) -> int:
     return 0
 
 
+def calibration_note(path: str) -> str:
+    """What a calibration file changes in the linear model, and what it cannot (friction)."""
+    from pendulab.calibration.files import FITTED_NAMES, load_calibration
+
+    cal = load_calibration(path)
+    used = [f"{name} = {getattr(cal, name):.4g}" for name in FITTED_NAMES if getattr(cal, name) is not None]
+    friction = ", ".join(f"{v:.4g}" for v in cal.friction)
+    uses = (f"it uses {', '.join(used)} from {path}" if used
+            else f"{path} holds friction only, so this is the default linear model (Beq, force gain and M_cart as the preset)")
+    return (f"linear model: {uses}; the friction vector [F1, v1, F2, v2, B] = [{friction}] is not in it "
+            "(stick-slip friction has no linearization at rest: it acts in 'pendulab simulate')")
+
+
 def run(args: argparse.Namespace) -> int:
     if args.plant == "seesaw":
         return run_seesaw(args)
@@ -114,10 +128,15 @@ def run(args: argparse.Namespace) -> int:
         # The loop the controller closes: e = -Lp*alpha, so the loop gain is Lp*C(s)*G(s).
         loop = controller.transfer_function() * plant.tf("tip")
         plot_root_locus(loop, args.root_locus, title=f"root locus of Lp·C(s)·G(s), {args.pendulum} pendulum")
+    note = calibration_note(args.calibration) if args.calibration else None
     if args.json:
         print(json.dumps({"zeros": [_number(z) for z in zeros], "poles": [_number(p) for p in poles], "gain": gain}))
+        if note:
+            print(note, file=sys.stderr)  # stdout stays one JSON object
     else:
         print(f"{args.output}/V = {format_zpk(zeros, poles, gain)}")
+        if note:
+            print(note)
         if args.root_locus:
             print(f"root locus written to {args.root_locus}")
     return 0

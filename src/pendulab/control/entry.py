@@ -69,8 +69,8 @@ def controller_from_options(
                                           ("--controller", file is not None), ("--demo", demo)) if present]
     if len(sources) > 1:
         raise UserError(f"give one controller, not {' and '.join(sources)}")
-    if compensators and not (kernel or file or demo):
-        raise UserError("--compensator needs a kernel: give --zeros, --poles and --gain (or --controller FILE)")
+    if compensators and not (kernel or file or demo or pid is not None):
+        raise UserError("--compensator needs a kernel: give --zeros, --poles and --gain (or --pid, --controller FILE, --demo)")
     if demo:
         base = ctl.demo_controller(pendulum)
     elif file:
@@ -79,8 +79,9 @@ def controller_from_options(
         try:
             kp, ki, kd = (float(p) for p in pid.split(","))
         except ValueError:
-            raise UserError(f"--pid {pid!r} must be three numbers KP,KI,KD, e.g. --pid 40,5,4") from None
-        return ctl.Controller.pid(kp, ki, kd)
+            raise UserError(f"--pid {pid!r} must be three numbers KP,KI,KD, e.g. --pid 300,100,100") from None
+        # The PID is the kernel; compensators go in series (a PID alone cannot balance: see README).
+        base = ctl.Controller.pid(kp, ki, kd)
     elif kernel:
         if gain is None:
             raise UserError("the kernel needs a gain: add --gain K")

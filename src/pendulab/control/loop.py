@@ -24,6 +24,7 @@ True
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -138,3 +139,136 @@ def poke_response(
         out["x"][k], out["alpha"][k], out["V"][k] = xp[_X], xp[_ALPHA], V
         xp = Ap @ xp + Bp[:, 0] * V + Bw[:, 0] * w[k]
     return out
+
+
+# ------------------------------------------------------------------------------ the linear prediction
+#: Gain multiples tried by :func:`linear_prediction` before it says that no gain of this shape balances.
+GAIN_SCAN = np.logspace(-2.0, 2.0, 41)
+
+
+@dataclass(frozen=True)
+class LinearPrediction:
+    """What the sampled linear loop predicts, before any simulation.
+
+    Attributes
+    ----------
+    poles_z : ndarray
+        Closed-loop poles of the sampled loop (``z``-plane), largest |z| first.
+    h : float
+        Control period (s): ``log(z)/h`` are the equivalent continuous poles.
+    stable : bool
+        All ``|z| < 1``.
+    never : str or None
+        Why no gain can balance the pendulum with this controller (None: some can).
+    """
+
+    poles_z: np.ndarray
+    h: float
+    stable: bool
+    never: str | None = None
+
+    @property
+    def max_abs_z(self) -> float:
+        return float(np.max(np.abs(self.poles_z))) if self.poles_z.size else 0.0
+
+    @property
+    def poles_s(self) -> np.ndarray:
+        """Equivalent continuous poles ``log(z)/h`` (1/s), in the order of ``poles_z``."""
+        with np.errstate(divide="ignore"):
+            return np.log(self.poles_z.astype(complex)) / self.h
+
+    def describe(self, count: int = 3) -> str:
+        """``linear model: stable, dominant closed-loop poles s = -2.39, -2.97±4.88j (1 ms sampled loop)``."""
+        shown: list[str] = []
+        for s in self.poles_s:
+            if len(shown) >= count:
+                break
+            if s.imag < -1e-9:
+                continue
+            text = f"{s.real:.3g}" + (f"±{abs(s.imag):.3g}j" if abs(s.imag) > 1e-9 else "")
+            shown.append(text)
+        word = "stable" if self.stable else "UNSTABLE"
+        return f"linear model: {word}, dominant closed-loop poles s = {', '.join(shown)} (max |z| = {self.max_abs_z:.5f})"
+
+    def agrees_with(self, outcome: str) -> bool:
+        """Whether the linear loop's stability matches a simulated outcome (``balanced`` is stable)."""
+        return self.stable == (outcome == "balanced")
+
+
+def never_balances(controller: Any, params: PlantParameters | None = None) -> str | None:
+    """Why this controller's shape can never balance the pendulum (the sign rule), or None.
+
+    ``alpha/V`` has a zero at ``s = 0``, so the closed loop's characteristic polynomial at ``s = 0``
+    is ``den_G(0)·den_C(0)`` whatever the gain, and its leading coefficient is 1. ``den_G(0) < 0``
+    (one plant pole in the right half plane), so a stable loop needs ``den_C(0) < 0``: an odd number
+    of controller poles on the positive real axis. A PID (poles at ``-1/Ti`` and ``-wf``) has none.
+
+    Examples
+    --------
+    >>> from pendulab.control.controller import Controller, demo_controller
+    >>> never_balances(demo_controller()) is None
+    True
+    >>> never_balances(Controller.pid(40, 5, 4)).split(":")[0]
+    'no gain can balance the pendulum with this controller'
+    """
+    params = params or PlantParameters.preset()
+    zeros, poles, _ = linearize(params).zpk("alpha")
+    if not np.any(np.abs(zeros) < 1e-9):
+        return None
+    den_g0 = float(np.real(np.prod(-np.asarray(poles, dtype=complex))))
+    _, c_poles, _ = controller.zpk() if hasattr(controller, "zpk") else (None, np.asarray(controller.poles(), dtype=complex), None)
+    c_poles = np.asarray(c_poles, dtype=complex)
+    den_c0 = float(np.real(np.prod(-c_poles))) if c_poles.size else 1.0
+    if den_g0 * den_c0 > 0:
+        return None
+    unstable_plant = ", ".join(f"{p.real:+.3g}" for p in np.asarray(poles, dtype=complex) if p.real > 0)
+    rhp = int(np.sum((np.abs(c_poles.imag) < 1e-12) & (c_poles.real > 0)))
+    return (
+        "no gain can balance the pendulum with this controller: alpha/V has a zero at s = 0, so the closed loop's "
+        f"characteristic polynomial at s = 0 is den_G(0)·den_C(0), and den_G(0) < 0 (the plant's pole at {unstable_plant}); "
+        f"the controller has {rhp} pole(s) on the positive real axis, so den_C(0) > 0 and a closed-loop pole stays in the right "
+        "half plane. Give it an odd number of unstable poles, as the demo's kernel (s + 5)/(s - 7) does: e.g. a PID "
+        "in series with 1/(s - 4), --pid 300,100,100 --compensator \"none;4\", balances both pendulums"
+    )
+
+
+def linear_prediction(
+    controller: Any,
+    params: PlantParameters | None = None,
+    *,
+    h: float = 1e-3,
+    method: str = "tustin",
+    delay: int = 0,
+) -> LinearPrediction:
+    """Closed-loop poles of the sampled linear loop as simulated, and whether any gain could balance.
+
+    ``delay`` is the transport delay of ``pendulab simulate --delay`` (control periods); the loop adds
+    the one sample of computation, as :func:`closed_loop_poles` documents.
+
+    Examples
+    --------
+    >>> from pendulab.control.controller import demo_controller
+    >>> p = linear_prediction(demo_controller())
+    >>> p.stable, p.never
+    (True, None)
+    """
+    ctl = controller if isinstance(controller, DiscreteLTI) else discretize(controller, h=h, method=method)
+    z = closed_loop_poles(ctl, params, delay=1 + max(int(delay), 0))
+    z = z[np.argsort(-np.abs(z))]
+    stable = bool(np.max(np.abs(z)) < 1) if z.size else True
+    never = None if isinstance(controller, DiscreteLTI) else never_balances(controller, params)
+    if never is None and not stable:
+        Ap, Bp, Cp, _ = sampled_plant(params, ctl.h)
+        works = [k for k in (*GAIN_SCAN, *(-GAIN_SCAN))
+                 if np.max(np.abs(np.linalg.eigvals(_loop_matrix(_scaled(ctl, k), Ap, Bp, Cp, 1 + max(int(delay), 0))))) < 1]
+        if not works:
+            never = (f"no gain balances this controller's shape: the sampled linear loop is unstable for every gain from "
+                     f"{GAIN_SCAN[0]:g}x to {GAIN_SCAN[-1]:g}x the given one, of either sign; move its zeros and poles")
+        elif all(k < 0 for k in works):
+            never = "the gain has the wrong sign for this controller's shape: only a gain of the opposite sign balances in the linear loop"
+    return LinearPrediction(z, ctl.h, stable, never)
+
+
+def _scaled(ctl: DiscreteLTI, k: float) -> DiscreteLTI:
+    """The same realization with its output (the voltage) scaled by ``k``."""
+    return DiscreteLTI(ctl.A, ctl.B, k * ctl.C, k * ctl.D, ctl.h, ctl.method)

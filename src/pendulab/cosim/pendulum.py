@@ -140,16 +140,18 @@ def _inputs_of(fmu: Path) -> set[str]:
 
 
 def collect_columns(log: Mapping[str, np.ndarray], params: PlantParameters) -> dict[str, np.ndarray]:
-    """The recorded signals under the SPEC's column names, plus ``tip``; ``_safety_cut_time`` aside."""
+    """The recorded signals under the SPEC's column names, plus ``tip`` and the supervisor's ``trip_reason``
+    (its codes: :data:`pendulab.fmu.models.supervisor.config.TRIP_REASONS`); ``_safety_cut_time`` aside."""
     columns = {"t": np.asarray(log["time"], dtype=float)}
     for path, name in RECORDED.items():
         columns[name] = np.asarray(log[path], dtype=float)
     columns["tip"] = params.Lp * columns["alpha"]
     trip_times = columns.pop("trip_time")
-    reasons = columns.pop("trip_reason")
+    reasons = columns["trip_reason"]
     tripped = np.flatnonzero(reasons > 0)
     columns["_safety_cut_time"] = float(trip_times[tripped[0]]) if tripped.size else None  # type: ignore[assignment]
-    order = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state", "_safety_cut_time")
+    order = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state", "trip_reason",
+             "_safety_cut_time")
     return {k: columns[k] for k in order}
 
 

@@ -45,7 +45,14 @@ def parse_controller_form(form: Mapping[str, Any]) -> Any:
 
     if form.get("mode") == "pid":
         pid = form.get("pid") or {}
-        controller = controller_from_options(pid=",".join(_text(pid, k).strip() for k in ("kp", "ki", "kd")))
+        values = [_text(pid, k).strip() for k in ("kp", "ki", "kd")]
+        for value, label in zip(values, ("Kp", "Ki", "Kd")):
+            _number(value, f"PID {label}")  # the form's words, before the command line's
+        # The PID in series with 1/(s - p): the unstable pole a PID needs to balance (README); empty: the PID alone.
+        pole = _text(pid, "pole").strip()
+        if pole:
+            _number(pole, "the PID's unstable pole p")
+        controller = controller_from_options(pid=",".join(values), compensators=[f"none;{pole}"] if pole else [])
     else:
         rows = [row for row in (form.get("compensators") or []) if any(_text(row, k).strip() for k in ("zeros", "poles", "gain"))]
         # As typed on the command line: --compensator "ZEROS;POLES;GAIN", read by the same parser.
@@ -63,7 +70,7 @@ def check_controller(form: Mapping[str, Any]) -> dict[str, Any]:
     try:
         controller = parse_controller_form(form)
     except UserError as exc:
-        return {"ok": False, "error": str(exc)}
+        return {"ok": False, "error": in_form_words(str(exc))}
     labels = ["kernel"] + [f"compensator {i}" for i in range(1, len(controller.factors))]
     factors = [{"label": label, "text": f.describe()} for label, f in zip(labels, controller.factors)]
     return {"ok": True, "describe": str(controller), "factors": factors, "order": controller.order}
@@ -82,8 +89,35 @@ def plant_parameters(form: Mapping[str, Any], calibration_path: str | None) -> A
     return plant_section(form, calibration_path).parameters()
 
 
+#: The command line's option names -> the form's words, for messages of the checks both share.
+FORM_WORDS = (("--stop-time", "stop time"), ("--step", "control period"), ("--delay", "transport delay"),
+              ("--poke magnitude", "poke magnitude"), ("--poke duration", "poke duration"), ("--poke", "poke"),
+              ("--pid", "PID"), ("--gain K", "the kernel's gain"), ("--compensator", "compensator"))
+
+
+def in_form_words(message: str) -> str:
+    """A message of the command line's checks with the form's words for its options.
+
+    Examples
+    --------
+    >>> in_form_words("--stop-time -1 must be a positive number of seconds")
+    'stop time -1 must be a positive number of seconds'
+    """
+    for option, words in FORM_WORDS:
+        message = message.replace(option, words)
+    return message
+
+
 def run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
-    """The run the whole form describes, validated; the first mistake raises UserError (the command line's message)."""
+    """The run the whole form describes, validated; the first mistake raises UserError in the form's words."""
+    try:
+        return _run_spec(form, calibration_path)
+    except UserError as exc:
+        raise UserError(in_form_words(str(exc))) from None
+
+
+def _run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
+    from pendulab.cli.simulate import check_poke_disturbs
     from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
 
     controller = parse_controller_form(form.get("controller") or {})
@@ -98,18 +132,16 @@ def run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
     timing = Timing(stop_time=stop_time, step=step, method=method, delay=int(delay_value))
     timing.validate()
     poke_form = form.get("poke") or {}
-    poke = Poke.parse(",".join(_text(poke_form, k) for k in ("magnitude", "duration", "start")))
+    poke = Poke(*(_number(_text(poke_form, key), f"poke {key}") for key in ("magnitude", "duration", "start")))
+    poke.validate()
+    check_poke_disturbs(dataclasses.astuple(poke), "poke magnitude", "poke duration")
     # The supervisor's modes (issue 21); a swing-up starts hanging.
     swing_up = bool(form.get("swing_up"))
     plant = dataclasses.replace(plant_section(form, calibration_path), start="hanging" if swing_up else "upright")
     spec = RunSpec(controller, plant=plant, poke=poke, timing=timing,
                    quantization=Quantization(enabled=bool(form.get("quantization", True))),
                    supervisor=Supervisor(recentre=bool(form.get("recentre")), swing_up=swing_up))
-    try:
-        return spec.validate()
-    except UserError as exc:
-        # The page names its fields, not the command line's options.
-        raise UserError(str(exc).replace("--stop-time", "the stop time")) from None
+    return spec.validate()
 
 
 def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[str, Any]:
@@ -143,10 +175,12 @@ def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[s
         delay = int(_number(form.get("delay", 0), "transport delay"))
     except UserError:
         delay = 0
-    from pendulab.control.loop import closed_loop_poles
+    from pendulab.control.loop import linear_prediction
 
-    # The sampled loop as simulated: one sample of computation plus the transport delay.
-    z = closed_loop_poles(controller, params, h=step, method=method if method in ("tustin", "zoh") else "tustin", delay=1 + max(delay, 0))
+    # The sampled loop as simulated (one sample of computation plus the transport delay), and whether any
+    # gain could balance: the same prediction 'pendulab simulate' prints.
+    prediction = linear_prediction(controller, params, h=step, method=method if method in ("tustin", "zoh") else "tustin",
+                                   delay=max(delay, 0))
     return {
         "branches": branches,
         "open_poles": points(rl.poles),
@@ -155,8 +189,10 @@ def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[s
         "stable": rl.stable,
         "view": list(rl.view),
         "bode": bode,
-        "sampled_stable": bool(np.max(np.abs(z)) < 1),
-        "sampled_max_abs_z": float(np.max(np.abs(z))),
+        "sampled_stable": prediction.stable,
+        "sampled_max_abs_z": prediction.max_abs_z,
+        "prediction": prediction.describe(),
+        "never": prediction.never,
         "unstable_open_loop_poles": int(np.sum(np.asarray(rl.poles).real > 0)),
     }
 

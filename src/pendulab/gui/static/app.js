@@ -5,7 +5,8 @@ const $ = (id) => document.getElementById(id);
 const MAX_UPLOAD = 1000000;  // as the server's limit: refuse a wrong file before sending it
 const COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf"];
 const METRICS = [
-  ["stable", "stable", ""],
+  ["verdict", "verdict", ""],
+  ["stable", "stable (balanced)", ""],
   ["natural_frequency_rad_s", "natural frequency", "rad/s"],
   ["peak_time_s", "peak time", "s"],
   ["overshoot_percent", "overshoot", "%"],
@@ -13,6 +14,7 @@ const METRICS = [
   ["final_value_rad", "final value", "rad"],
   ["cart_speed_change_m_s", "cart speed change", "m/s"],
   ["safety_cut_time_s", "safety cut at", "s"],
+  ["safety_cut_reason", "safety cut reason", ""],
   ["limit_cycle_amplitude_rad", "limit cycle amplitude", "rad"],
   ["limit_cycle_frequency_rad_s", "limit cycle frequency", "rad/s"],
 ];
@@ -60,8 +62,17 @@ async function api(path, body) {
 }
 
 function setStatus(el, ok, text) {
-  el.className = "status " + (ok ? "ok" : "error");
+  el.className = "status " + (ok === "warn" ? "warn" : ok ? "ok" : "error");
   el.textContent = text;
+}
+
+// The run's verdict (pendulab.analysis.verdict, from metrics.json): green only for balanced without
+// warnings, amber for balanced with warnings, red for a cut or a fall.
+function verdictStatus(metrics) {
+  const v = metrics.verdict;
+  if (!v) return { ok: metrics.stable ? true : false, text: metrics.stable ? "balanced" : "not balanced" };
+  const lines = [v.headline, ...v.warnings.map((w) => `  warning: ${w.kind}: ${w.text}; ${w.advice}`)];
+  return { ok: v.clean ? true : v.outcome === "balanced" ? "warn" : false, text: lines.join("\n") };
 }
 
 // ------------------------------------------------------------------------------------ the form
@@ -76,7 +87,7 @@ function addCompensator(values) {
   const tr = document.createElement("tr");
   tr.className = "comp";
   tr.innerHTML = `<th>G${i}</th><td><input class="c-zeros"></td><td><input class="c-poles"></td>` +
-    `<td><input class="c-gain" placeholder="1"></td><td><button type="button" class="remove" title="remove">×</button></td>`;
+    `<td><input class="c-gain"></td><td><button type="button" class="remove" title="remove">×</button></td>`;
   $("factor-rows").appendChild(tr);
   if (values) {
     tr.querySelector(".c-zeros").value = values[0];
@@ -97,7 +108,7 @@ function controllerForm() {
     compensators: compRows().map((tr) => ({
       zeros: tr.querySelector(".c-zeros").value, poles: tr.querySelector(".c-poles").value, gain: tr.querySelector(".c-gain").value,
     })),
-    pid: { kp: $("pid-kp").value, ki: $("pid-ki").value, kd: $("pid-kd").value },
+    pid: { kp: $("pid-kp").value, ki: $("pid-ki").value, kd: $("pid-kd").value, pole: $("pid-pole").value },
   };
 }
 
@@ -172,6 +183,7 @@ const updateLinear = debounce(async () => {
     (answer.unstable_open_loop_poles ? ` (the open loop has ${answer.unstable_open_loop_poles} unstable pole(s): read stability from the closed-loop poles, not from the margins alone)` : "");
   $("linear-verdict").textContent = (answer.stable ? "closed loop stable" : "closed loop UNSTABLE") +
     `; sampled loop with delay: ${answer.sampled_stable ? "stable" : "UNSTABLE"} (max |z| = ${answer.sampled_max_abs_z.toFixed(5)})`;
+  $("linear-never").textContent = answer.never ? `Before you run it: ${answer.never}.` : "";
 }, 300);
 
 // ------------------------------------------------------------------------------------ runs
@@ -232,7 +244,8 @@ async function startRun() {
       if (s.run.state === "error") { setStatus(status, false, s.run.error); renderRuns(); break; }
       if (s.run.state === "done") {
         await loadRunData(run);
-        setStatus(status, true, `${run.data.metrics.stable ? "STABLE: the pendulum stayed up" : "NOT STABLE"}: results in ${s.run.folder}`);
+        const v = verdictStatus(run.data.metrics);
+        setStatus(status, v.ok, `${v.text}\nresults in ${s.run.folder}`);
         break;
       }
     }
@@ -257,6 +270,7 @@ async function openFolder() {
 // ------------------------------------------------------------------------------------ results
 function fmt(v) {
   if (v === null || v === undefined) return "n/a";
+  if (typeof v === "object" && v.outcome) return v.outcome + (v.warnings.length ? ` (${v.warnings.map((w) => w.kind).join(", ")})` : "");
   if (typeof v === "boolean") return v ? "yes" : "no";
   if (typeof v === "number") return Number(v.toPrecision(4)).toString();
   return String(v);
@@ -311,10 +325,25 @@ function drawMetrics(shown) {
       td.dataset.run = run.summary.id; td.dataset.key = key;
       td.dataset.value = value === undefined ? "" : JSON.stringify(value);
       td.textContent = fmt(value);
+      const why = (run.data.metrics.not_reported || {})[key];
+      if (why) { td.title = why; td.textContent += " *"; }
+      if (key === "verdict" && value) td.className = value.clean ? "ok" : value.outcome === "balanced" ? "warn" : "error";
       tr.appendChild(td);
     });
     table.appendChild(tr);
   }
+  // Why a metric is not reported, in words (the table marks it with *).
+  const notes = $("metrics-notes");
+  notes.innerHTML = "";
+  shown.forEach((run) => {
+    const reasons = run.data.metrics.not_reported || {};
+    new Set(Object.values(reasons)).forEach((why) => {
+      const keys = Object.keys(reasons).filter((k) => reasons[k] === why).map((k) => (METRICS.find((m) => m[0] === k) || [k, k])[1]);
+      const line = document.createElement("div");
+      line.textContent = `* ${run.data.label}: ${keys.join(", ")} not reported: ${why}`;
+      notes.appendChild(line);
+    });
+  });
 }
 
 function drawDownloads() {
@@ -427,8 +456,21 @@ function modeChanged() {
   controllerChanged();
 }
 
+// A reload keeps the tab's runs: the tab id lives in sessionStorage and the server lists the tab's runs.
+async function restoreRuns() {
+  const answer = await api("/api/runs");
+  if (!answer.ok) return;
+  for (const summary of answer.runs) {
+    if (runs.has(summary.id)) continue;
+    const run = await addRun(summary);
+    if (summary.state === "done") {
+      try { await loadRunData(run); } catch (err) { /* listed; its data is gone */ }
+    }
+  }
+}
+
 function init() {
-  ["k-zeros", "k-poles", "k-gain", "pid-kp", "pid-ki", "pid-kd"].forEach((id) => $(id).addEventListener("input", controllerChanged));
+  ["k-zeros", "k-poles", "k-gain", "pid-kp", "pid-ki", "pid-kd", "pid-pole"].forEach((id) => $(id).addEventListener("input", controllerChanged));
   ["mode-kernel", "mode-pid"].forEach((id) => $(id).addEventListener("change", modeChanged));
   ["pendulum", "cart", "calibration", "method", "delay", "step"].forEach((id) => $(id).addEventListener("change", updateLinear));
   $("add-comp").onclick = () => addCompensator();
@@ -438,6 +480,7 @@ function init() {
   $("play").onclick = play;
   $("cal-file").addEventListener("change", uploadCalibration);
   loadCalibrations();
+  restoreRuns();
   requestAnimationFrame(() => { document.body.dataset.drawn = "1"; });
   loadPlotly().then(() => { document.body.dataset.plotly = "1"; });
 }
