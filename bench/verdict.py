@@ -9,7 +9,8 @@ gain a decade, roots half a decade: "kernel"); and around the old lab's three PI
 each number by its own factor ``10**U(-d/2, d/2)``. Each runs on either pendulum (the PIDs on the long
 one, as in the old lab), with the default poke (50 rad/s²) or the lab's (220 rad/s²; always for the
 PIDs), and a transport delay of 0, 1 or 2 periods (the rig's). Each is simulated
-for 5 s and for 20 s and judged by :func:`pendulab.analysis.verdict.judge`. It prints
+for 5 s and for 20 s through :func:`pendulab.simulate`, whose result carries the verdict of
+:mod:`pendulab.analysis.verdict`. It prints
 
 * **trust**: among the 5 s runs judged "balanced without warnings", the share whose 20 s run is not
   cut and does not fall;
@@ -95,9 +96,8 @@ def draw(n: int, seed: int = 24) -> list[Case]:
 
 def evaluate(case: Case, stop_times: tuple[float, ...] = (5.0, 20.0)) -> dict[str, Any]:
     """The case's linear prediction and its verdict at each stop time."""
-    from pendulab.analysis.verdict import Limits, judge
     from pendulab.control.loop import linear_prediction
-        from pendulab.model.parameters import PlantParameters
+    from pendulab.model.parameters import PlantParameters
     from pendulab.simulation import simulate
     from pendulab.spec import RunSpec, Timing
 
@@ -106,7 +106,7 @@ def evaluate(case: Case, stop_times: tuple[float, ...] = (5.0, 20.0)) -> dict[st
     verdicts = {}
     for stop in stop_times:
         result = simulate(RunSpec.for_parameters(case.controller, params, timing=Timing(stop_time=stop, delay=case.delay)))
-        verdicts[stop] = judge(result.columns, poke_start=params.poke_start, limits=Limits.of(params))
+        verdicts[stop] = result.verdict
     return {"prediction": prediction, "verdicts": verdicts}
 
 

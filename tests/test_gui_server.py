@@ -98,13 +98,20 @@ def test_controller_messages_are_the_command_lines(form, argv, capsys, tmp_path)
     assert not (tmp_path / "never").exists()
 
 
-def test_settings_messages_are_the_command_lines(capsys, tmp_path):
+def test_settings_messages_are_the_command_lines_in_the_forms_words(capsys, tmp_path):
     form = {"controller": {"mode": "kernel", "zeros": "-5", "poles": "7", "gain": "40000"}, "stop_time": "2", "delay": "9",
             "poke": {"magnitude": "50", "duration": "0.005", "start": "1"}}
     with pytest.raises(UserError) as exc:
         run_spec(form, None)
     assert main(["simulate", "--demo", "--stop-time", "2", "--delay", "9", "--out", str(tmp_path / "x")]) == 2
-    assert capsys.readouterr().err.strip() == f"pendulab: error: {exc.value}"
+    cli = capsys.readouterr().err.strip().removeprefix("pendulab: error: ")
+    # The same check and message, with the form's words for the command line's options (issue 24).
+    assert cli.startswith("--delay 9 ") and str(exc.value) == cli.replace("--delay", "transport delay")
+    with pytest.raises(UserError) as exc:
+        run_settings({**form, "delay": "0", "poke": {"magnitude": "abc", "duration": "0.005", "start": "1"}}, None, "default")
+    assert str(exc.value).startswith("poke magnitude 'abc' is not a number") and "--" not in str(exc.value)
+    with pytest.raises(UserError, match="^poke magnitude is 0: a poke of size 0 disturbs nothing"):
+        run_settings({**form, "delay": "0", "poke": {"magnitude": "0", "duration": "0.005", "start": "1"}}, None, "default")
     with pytest.raises(UserError, match="poke starts at t=3"):
         run_spec({**form, "delay": "0", "poke": {"magnitude": "50", "duration": "0.005", "start": "3"}}, None)
 

@@ -38,8 +38,13 @@ STATUSES = ("balanced", "cut", "fell", "error", "timeout")
 def verdict(metrics: Mapping[str, Any]) -> str:
     """The outcome of one run from its metrics: ``balanced``, ``cut`` or ``fell``.
 
-    The one place a sweep decides a run's verdict, so that issue 24's verdict replaces this body alone.
+    The one place a sweep decides a run's verdict: the outcome of :mod:`pendulab.analysis.verdict`
+    (``metrics["verdict"]``, as ``simulate`` prints it), or, for metrics without one, the same rule on
+    ``stable`` and the cut.
     """
+    outcome = (metrics.get("verdict") or {}).get("outcome") if isinstance(metrics.get("verdict"), Mapping) else None
+    if outcome in STATUSES:
+        return str(outcome)
     if metrics.get("stable"):
         return "balanced"
     return "cut" if metrics.get("safety_cut_time_s") is not None else "fell"
