@@ -39,8 +39,9 @@ def _inputs(root):
     cols_nan["alpha"][1500:] = np.nan
     write_results(nan_run, cols_nan, {"pendulum": "long", "source": "rig"}, {})
     cut = root / "cut_run"
-    write_results(cut, cols, {"pendulum": "long", "source": "rig"},
-                  {"verdict": "cut before the poke", "not_reported": "cut before the poke (the rig's watchdog tripped at t = 0.920 s)"})
+    from pendulab.analysis.verdict import cut_before_poke
+
+    write_results(cut, cols, {"pendulum": "long", "source": "rig"}, cut_before_poke(0.920, "the rig's watchdog tripped")[0])
     (root / "earlier.json").write_text('{"friction": [1, 0.005, 3, 0.05, 20]}\n')
     (root / "earlier.csv").write_text("t,V,x\n0,0,0\n")
     (root / "earlier.png").write_bytes(b"\x89PNG earlier")

@@ -209,7 +209,8 @@ def test_sigterm_ends_lab_as_the_end_key_does(tmp_path):
     metrics = json.loads((out_dir / "metrics.json").read_text())
     assert "SIGTERM" in metrics["end_reason"]
     # No poke was given: the controller's catch after the hand let go is not taken for one.
-    assert metrics.get("verdict") == "cut before the poke" and metrics["stable"] is None, (metrics, out)
+    assert metrics["verdict"]["measures"].get("before_poke") and metrics["stable"] is False, (metrics, out)
+    assert metrics["verdict"]["outcome"] == "cut" and "before the poke" in metrics["verdict"]["headline"]
 
 
 @pytest.mark.parametrize("mode", ["tcp", "pty"])
@@ -236,9 +237,9 @@ def test_a_session_cut_before_its_poke_has_no_metrics():
     columns = {"t": t, "alpha": np.round(alpha / 0.0015) * 0.0015, "xdot": 0 * t, "voltage": np.where(released, 0.5, 0.0),
                "supervisor_state": np.where(t >= 0.25, float(RUNNING), 1.0)}
     m = lab_metrics(columns, q_alpha=0.0015, end_reason="the rig's watchdog tripped", ended_early=True)
-    assert m["verdict"] == "cut before the poke" and m["poke_start_detected_s"] is None
-    assert m["stable"] is None and m["overshoot_percent"] is None and m["safety_cut_time_s"] == pytest.approx(0.919)
-    assert "watchdog" in m["not_reported"] and m["hand_release_s"] == pytest.approx(0.3)
+    assert m["verdict"]["outcome"] == "cut" and m["verdict"]["measures"]["before_poke"] and m["poke_start_detected_s"] is None
+    assert m["stable"] is False and m["overshoot_percent"] is None and m["safety_cut_time_s"] == pytest.approx(0.919)
+    assert "watchdog" in m["not_reported"]["peak_time_s"] and m["hand_release_s"] == pytest.approx(0.3)
     # The same log, ended by the operator: not a cut, and the hand's release is not a poke.
     m = lab_metrics(columns, q_alpha=0.0015, end_reason="ended by the operator (e)", ended_early=False)
     assert m["poke_start_detected_s"] is None and "no poke found" in m["error"] and m.get("verdict") is None

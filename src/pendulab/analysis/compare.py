@@ -56,7 +56,7 @@ def _is_old_lab_folder(path: Path) -> bool:
 
 def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float = 2 * np.pi / 4096) -> ComparedRun:
     """A run folder (``pendulab simulate``/``lab``), a run file, or a folder of the old lab's logs."""
-    from pendulab.analysis.metrics import compute_metrics
+    from pendulab.analysis.verdict import Limits, assess, was_cut_before_poke
 
     path = Path(path)
     if not path.exists():
@@ -97,16 +97,16 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
     params = meta.get("parameters") if isinstance(meta.get("parameters"), Mapping) else None
     if source != "rig" and params and "poke_start" in params and source != "old lab":
         poke = float(np.ravel(params["poke_start"])[0])
-    if metrics.get("verdict") == "cut before the poke":
-        raise UserError(f"run {path} was {metrics.get('not_reported') or 'cut before the poke'}; a comparison aligns runs at their poke")
+    if was_cut_before_poke(metrics):
+        raise UserError(f"run {path} was cut before the poke ({metrics['verdict']['headline']}); a comparison aligns runs at their poke")
     if poke is None and metrics.get("poke_start_detected_s") is not None:
         poke = float(metrics["poke_start_detected_s"])
     if poke is None:
         poke = detect_poke(columns["t"], columns["alpha"], q_alpha=q_alpha)
     if poke is None:
         raise UserError(f"no poke found in the angle of {path}; a comparison aligns runs at their poke")
-    if not metrics:
-        metrics = compute_metrics(columns["t"], columns["alpha"], poke_start=poke, q_alpha=q_alpha, xdot=columns.get("xdot"))
+    if not metrics:  # a run without metrics.json (the old lab's logs): measured and judged as any run
+        metrics, _ = assess(columns, poke_start=poke, limits=Limits(q_alpha=q_alpha))
     name = path.name if path.is_dir() else f"{path.parent.name}/{path.name}"
     label = name if name == source else f"{name} ({source})"
     return ComparedRun(label, columns, poke, metrics, source)
@@ -168,10 +168,21 @@ def _fmt(value: Any, unit: str) -> str:
     return f"{value:.4g} {unit}"
 
 
+def _outcome(metrics: Mapping[str, Any]) -> str:
+    """The verdict's outcome and warnings, short: ``balanced``, ``balanced (drift)``, ``cut (track limit)``."""
+    verdict = metrics.get("verdict")
+    if not isinstance(verdict, Mapping):
+        return "n/a"
+    kinds = [w.get("kind", "") for w in verdict.get("warnings") or ()]
+    detail = verdict.get("cut_reason") if verdict.get("outcome") in ("cut", "fell") and verdict.get("cut_reason") else ", ".join(kinds)
+    return f"{verdict.get('outcome')}" + (f" ({detail})" if detail else "")
+
+
 def table_text(runs: list[ComparedRun]) -> str:
     """The old lab's table as text: one row per metric, one column per run."""
     width = max(22, *(len(r.label) + 2 for r in runs))
     lines = ["".ljust(20) + "".join(r.label.rjust(width) for r in runs)]
+    lines.append("verdict".ljust(20) + "".join(_outcome(r.metrics).rjust(width) for r in runs))
     for key, label, unit, _ in TABLE:
         lines.append(label.ljust(20) + "".join(_fmt(r.metrics.get(key), unit).rjust(width) for r in runs))
     if len(runs) >= 2:

@@ -174,13 +174,15 @@ class Verdict:
 
     def headline(self) -> str:
         """The first line a student reads: the outcome and the worst warnings."""
+        if self.measures.get("before_poke"):
+            return f"CUT at t = {self.cut_time:.3f} s before the poke: {self.cut_reason}; there is no response to measure"
         if self.outcome == "not tested":
             return "NOT TESTED: the run had no disturbance (a poke of size or length 0), so any controller stays up"
         if self.outcome == "fell":
             where = f"the angle passed the {self._angle_limit()} limit" if self.cut_reason == "angle limit" else "the pendulum fell"
             text = f"FELL at t = {self.cut_time:.3f} s: {where}"
         elif self.outcome == "cut":
-            text = f"CUT at t = {self.cut_time:.3f} s: {_CUT_WORDS.get(str(self.cut_reason), f'the supervisor cut the motor ({self.cut_reason})')}"
+            text = f"CUT at t = {self.cut_time:.3f} s: {_CUT_WORDS.get(str(self.cut_reason), f'the session ended early ({self.cut_reason})')}"
             if self.cut_reason == "track limit":
                 text += f" ({self.measures.get('x_max', 0.4):.2f} m) with the pendulum still up"
         else:
@@ -532,3 +534,34 @@ def _not_reported(metrics: Mapping[str, Any], verdict: Verdict, columns: Mapping
 def _seconds(value: float) -> str:
     """A time to two significant digits: ``0.04 s``, ``4.3 s``, ``12 s``."""
     return f"{float(f'{value:.2g}'):g} s"
+
+
+def cut_before_poke(cut_time: float, reason: str, end_time: float | None = None) -> tuple[dict[str, Any], Verdict]:
+    """``metrics.json``'s content for a rig session cut before its poke: no response, the verdict ``cut``.
+
+    Every metric is None; ``not_reported`` says why for each response metric; the verdict's
+    ``measures`` mark it (``before_poke``), which ``compare`` reads to refuse aligning such a run.
+
+    Examples
+    --------
+    >>> m, v = cut_before_poke(0.919, "the rig's watchdog tripped")
+    >>> v.headline()
+    "CUT at t = 0.919 s before the poke: the rig's watchdog tripped; there is no response to measure"
+    >>> m["stable"], m["not_reported"]["peak_time_s"]
+    (False, "cut before the poke (the rig's watchdog tripped at t = 0.919 s): there is no response to measure")
+    """
+    from pendulab.analysis.metrics import METRIC_KEYS
+
+    verdict = Verdict("cut", float(end_time if end_time is not None else cut_time), reason, float(cut_time),
+                      measures={"before_poke": True})
+    why = f"cut before the poke ({reason} at t = {cut_time:.3f} s): there is no response to measure"
+    metrics: dict[str, Any] = {key: None for key in METRIC_KEYS}
+    metrics.update(safety_cut_time_s=float(cut_time), stable=False, not_reported={key: why for key in RESPONSE_METRICS},
+                   safety_cut_reason=reason, verdict=verdict.to_dict())
+    return metrics, verdict
+
+
+def was_cut_before_poke(metrics: Mapping[str, Any]) -> bool:
+    """Whether ``metrics.json`` is that of a run cut before its poke (:func:`cut_before_poke`)."""
+    verdict = metrics.get("verdict")
+    return isinstance(verdict, Mapping) and bool((verdict.get("measures") or {}).get("before_poke"))

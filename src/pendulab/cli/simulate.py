@@ -81,20 +81,6 @@ def parse_poke(text: str) -> tuple[float, float, float]:
     return dataclasses.astuple(Poke.parse(text))  # type: ignore[return-value]
 
 
-def check_poke_disturbs(poke: tuple[float, float, float], magnitude: str = "--poke magnitude", duration: str = "--poke duration") -> None:
-    """Refuse a poke that disturbs nothing: with no disturbance any controller "stays up" (UserError).
-
-    ``magnitude`` and ``duration`` name the fields in the message (the GUI passes its form's words). A
-    :class:`pendulab.spec.RunSpec` with such a poke still runs in Python; its verdict is ``not tested``.
-    """
-    if poke[0] == 0:
-        raise UserError(f"{magnitude} is 0: a poke of size 0 disturbs nothing, so any controller would stay up and the run "
-                        "would test nothing; give a magnitude such as 50 rad/s^2 (the default) or 220 (the lab's)")
-    if poke[1] == 0:
-        raise UserError(f"{duration} is 0 s: a poke of length 0 disturbs nothing, so the run would test nothing; "
-                        "give a duration such as 0.005 s (the default)")
-
-
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
     """The run the options describe (asking on a terminal when no controller is given), validated."""
     from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
@@ -120,7 +106,7 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
         # Flags given on the command line win over the answers' defaults.
         plant = dataclasses.replace(asked.plant, calibration=asked.plant.calibration or spec.plant.calibration)
         spec = asked.replace(plant=plant, poke=poke or asked.poke)
-    check_poke_disturbs(dataclasses.astuple(spec.poke))  # with no disturbance the run would test nothing
+    spec.poke.check_disturbs()  # with no disturbance the run would test nothing
     return spec.validate()
 
 
@@ -187,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"the simulation failed: {exc}; check the controller, the poke and the parameters") from None
     if sys.stderr.isatty():
         print("\r" + " " * 40 + "\r", end="", file=sys.stderr)
-    folder.prepare()
+    folder.prepare(announce=lambda line: print(line, file=sys.stderr))  # stdout starts with the verdict
     written = list(result.write(out_dir).values())
     if args.plot:
         from pendulab.analysis.plots import plot_run

@@ -117,7 +117,6 @@ def run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
 
 
 def _run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
-    from pendulab.cli.simulate import check_poke_disturbs
     from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
 
     controller = parse_controller_form(form.get("controller") or {})
@@ -134,7 +133,7 @@ def _run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
     poke_form = form.get("poke") or {}
     poke = Poke(*(_number(_text(poke_form, key), f"poke {key}") for key in ("magnitude", "duration", "start")))
     poke.validate()
-    check_poke_disturbs(dataclasses.astuple(poke), "poke magnitude", "poke duration")
+    poke.check_disturbs("poke magnitude", "poke duration")
     # The supervisor's modes (issue 21); a swing-up starts hanging.
     swing_up = bool(form.get("swing_up"))
     plant = dataclasses.replace(plant_section(form, calibration_path), start="hanging" if swing_up else "upright")

@@ -473,7 +473,6 @@ def rig_columns(log_path: Path, Lp: float) -> dict[str, np.ndarray]:
 #: After the hand lets go, the controller's catch is not a poke: the poke is looked for from this long after.
 RELEASE_SETTLE = 0.2
 #: The verdict of a session that ended before its poke (the one verdict in pendulab.analysis maps it).
-CUT_BEFORE_POKE = "cut before the poke"
 
 
 def hand_release_time(columns: dict[str, np.ndarray]) -> float | None:
@@ -492,8 +491,8 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
     The response is read from the poke, found after the hand let go (:func:`hand_release_time`) and
     before any cut: the supervisor's trip, or the end of a session that ended by itself
     (``ended_early``: the rig's watchdog, a fault, a lost link, a signal). A session cut before its
-    poke has no response: every metric is None, with ``not_reported`` saying why and the verdict
-    :data:`CUT_BEFORE_POKE`.
+    poke has no response: every metric is None, with ``not_reported`` saying why, and the verdict (of
+    :mod:`pendulab.analysis.verdict`, like every run's) ``cut`` before the poke.
 
     Examples
     --------
@@ -501,11 +500,12 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
     >>> cols = {"t": t, "alpha": 0.01 * np.sin(20 * t), "xdot": 0 * t, "voltage": 1 + 0 * t,
     ...         "supervisor_state": np.full(t.size, float(RUNNING))}
     >>> m = lab_metrics(cols, q_alpha=0.0015, end_reason="the rig's watchdog tripped", ended_early=True)
-    >>> m["verdict"], m["stable"], m["overshoot_percent"], m["safety_cut_time_s"]
-    ('cut before the poke', None, None, 0.919)
+    >>> m["verdict"]["headline"], m["stable"], m["overshoot_percent"], m["safety_cut_time_s"]
+    ("CUT at t = 0.919 s before the poke: the rig's watchdog tripped; there is no response to measure", False, None, 0.919)
     """
     from pendulab.analysis.compare import detect_poke
-    from pendulab.analysis.metrics import METRIC_KEYS, compute_metrics
+    from pendulab.analysis.metrics import METRIC_KEYS
+    from pendulab.analysis.verdict import Limits, assess, cut_before_poke
 
     t = columns["t"]
     cut = cut_reason = None
@@ -522,20 +522,18 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
     metrics: dict[str, Any]
     if poke is not None and t.size > 10 and poke < last - 0.05:
         try:
-            metrics = compute_metrics(t, columns["alpha"], poke_start=poke, q_alpha=q_alpha, xdot=columns["xdot"], safety_cut_time=cut)
+            metrics, _ = assess(columns, poke_start=poke, limits=Limits(q_alpha=q_alpha), safety_cut_time=cut,
+                                end_reason=end_reason if ended_early and not tripped.size else None)
         except Exception as exc:  # noqa: BLE001 - a log too short or odd for metrics still gets its files
             metrics = {"error": f"metrics could not be computed: {exc}"}
     elif cut is not None:
-        metrics = {key: None for key in METRIC_KEYS}
-        metrics["safety_cut_time_s"] = cut
-        metrics["not_reported"] = f"{CUT_BEFORE_POKE} ({cut_reason} at t = {cut:.3f} s): there is no response to measure"
-        metrics["verdict"] = CUT_BEFORE_POKE
+        metrics, _ = cut_before_poke(cut, str(cut_reason), float(t[-1]))
         poke = None
     else:
         metrics = {key: None for key in METRIC_KEYS}
         metrics["error"] = ("no poke found in the measured angle while the controller held the pendulum"
                             + ("" if release is not None else " (the motor never acted with the controller running)"))
-    if cut is not None:
+    if cut is not None and not metrics.get("safety_cut_reason"):
         metrics["safety_cut_reason"] = cut_reason
     metrics["hand_release_s"] = release
     metrics["poke_start_detected_s"] = poke
