@@ -365,7 +365,7 @@ def test_fresh_form_lead_verdict_form_words_and_reload(gui):
     type_into(d, "stop-time", "-1")
     type_into(d, "poke-mag", "50")
     d.find_element(By.ID, "run").click()
-    wait(d, lambda d: status(d, "run-status")[1].startswith("stop time -1"), 10)
+    wait(d, lambda d: status(d, "run-status")[1].startswith("the stop time -1"), 10)
     type_into(d, "stop-time", "5")
 
     folder = run_and_wait(d)

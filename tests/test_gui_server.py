@@ -108,10 +108,10 @@ def test_settings_messages_are_the_command_lines_in_the_forms_words(capsys, tmp_
     # The same check and message, with the form's words for the command line's options (issue 24).
     assert cli.startswith("--delay 9 ") and str(exc.value) == cli.replace("--delay", "transport delay")
     with pytest.raises(UserError) as exc:
-        run_settings({**form, "delay": "0", "poke": {"magnitude": "abc", "duration": "0.005", "start": "1"}}, None, "default")
+        run_spec({**form, "delay": "0", "poke": {"magnitude": "abc", "duration": "0.005", "start": "1"}}, None)
     assert str(exc.value).startswith("poke magnitude 'abc' is not a number") and "--" not in str(exc.value)
     with pytest.raises(UserError, match="^poke magnitude is 0: a poke of size 0 disturbs nothing"):
-        run_settings({**form, "delay": "0", "poke": {"magnitude": "0", "duration": "0.005", "start": "1"}}, None, "default")
+        run_spec({**form, "delay": "0", "poke": {"magnitude": "0", "duration": "0.005", "start": "1"}}, None)
     with pytest.raises(UserError, match="poke starts at t=3"):
         run_spec({**form, "delay": "0", "poke": {"magnitude": "50", "duration": "0.005", "start": "3"}}, None)
 

@@ -124,7 +124,7 @@ def test_simulate_into_an_earlier_run(tmp_path, capsys):
     assert "holds an earlier run" in _one_line(capsys)
     assert (out / "run.csv").read_bytes() == first
     assert main(["simulate", "--pid", "40,5,4", "--stop-time", "1.5", "--out", str(out), "--overwrite"]) == 0
-    assert "removed the earlier run" in capsys.readouterr().out
+    assert "removed the earlier run" in capsys.readouterr().err  # stderr: simulate's stdout starts with the verdict
     assert (out / "run.csv").read_bytes() != first
 
 

@@ -90,7 +90,7 @@ def plant_parameters(form: Mapping[str, Any], calibration_path: str | None) -> A
 
 
 #: The command line's option names -> the form's words, for messages of the checks both share.
-FORM_WORDS = (("--stop-time", "stop time"), ("--step", "control period"), ("--delay", "transport delay"),
+FORM_WORDS = (("--stop-time", "the stop time"), ("--step", "control period"), ("--delay", "transport delay"),
               ("--poke magnitude", "poke magnitude"), ("--poke duration", "poke duration"), ("--poke", "poke"),
               ("--pid", "PID"), ("--gain K", "the kernel's gain"), ("--compensator", "compensator"))
 
@@ -101,7 +101,7 @@ def in_form_words(message: str) -> str:
     Examples
     --------
     >>> in_form_words("--stop-time -1 must be a positive number of seconds")
-    'stop time -1 must be a positive number of seconds'
+    'the stop time -1 must be a positive number of seconds'
     """
     for option, words in FORM_WORDS:
         message = message.replace(option, words)
