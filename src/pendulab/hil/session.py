@@ -82,9 +82,12 @@ DRIVE_TIME = 0.15
 BALANCE_STILL = 1.0
 BALANCE_VOLTAGE = 1.0
 BALANCE_DRIVE = 0.1
-#: The cart travelled this far (m) with the pendulum up and its encoder gave no count: a dead or frozen encoder
-#: (moving the pivot 15 mm turns a balanced pendulum by far more than its encoder's step).
+#: The cart travelled this far (m) with the pendulum up and its encoder gave no count for PIVOT_STILL (s): a dead
+#: or frozen encoder (moving the pivot 15 mm turns a balanced pendulum by far more than its encoder's step). The
+#: time matters at a swing's turning point: after a swing-up's catch the cart runs at 0.3 m/s while a 3 degree
+#: swing dwells about 50 ms within one count (a healthy encoder, measured: issue 21).
 PIVOT_TRAVEL = 0.015
+PIVOT_STILL = 0.15
 
 
 class EncoderWatch:
@@ -93,7 +96,7 @@ class EncoderWatch:
     The cart: the motor drives it (``|V| >=`` :data:`DRIVE_VOLTAGE` for :data:`DRIVE_TIME` in all), or the
     controller balances the pendulum for :data:`BALANCE_STILL` (which moves the cart all the time), and its
     count does not change. The pendulum: held up by the controller while the cart travels :data:`PIVOT_TRAVEL`, its
-    count does not change. :meth:`update` returns what is wrong, in words, or None.
+    count does not change for :data:`PIVOT_STILL`. :meth:`update` returns what is wrong, in words, or None.
 
     Examples
     --------
@@ -108,6 +111,7 @@ class EncoderWatch:
         self.theta: float | None = None
         self.driven = self.still = self.pushed = 0.0
         self.x_at_theta = 0.0
+        self.theta_still = 0.0
 
     def update(self, x: float, theta: float, voltage: float, *, running: bool) -> str | None:
         if x != self.x:
@@ -127,8 +131,10 @@ class EncoderWatch:
                 return (f"the cart encoder gave no count for {self.still:.1f} s while the controller balanced the pendulum "
                         f"(the motor at {BALANCE_VOLTAGE:g} V or more for {self.pushed * 1e3:.0f} ms of it): a dead or frozen cart encoder")
         if theta != self.theta or not running:
-            self.theta, self.x_at_theta = theta, x
-        elif abs(x - self.x_at_theta) > PIVOT_TRAVEL:
+            self.theta, self.x_at_theta, self.theta_still = theta, x, 0.0
+            return None
+        self.theta_still += self.period
+        if self.theta_still > PIVOT_STILL and abs(x - self.x_at_theta) > PIVOT_TRAVEL:
             return (f"the pendulum encoder gave no count while the cart moved {abs(x - self.x_at_theta) * 1e3:.0f} mm under the "
                     "balanced pendulum: a dead or frozen pendulum encoder")
         return None
