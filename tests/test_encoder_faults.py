@@ -86,9 +86,10 @@ def test_lab_stops_the_motor_on_an_encoder_fault_from_the_emulator(tmp_path, fau
                          stdin="s\n", timeout=60)
             emu.wait_for("motor off", timeout=5)
             lines = list(emu.lines)
-        if "watchdog" not in result.stdout:
+        if "encoder gave no count" in result.stdout:
             break
-        print(f"the watchdog ended the session on this loaded host; again:\n{result.stdout[-300:]}")
+        # The real-time link lost on this shared host (watchdog, a pty write timeout) before the fault: again.
+        print(f"the session ended before the encoder fault; again:\n{result.stdout[-300:]}")
     assert f"the {which} encoder gave no count" in result.stdout, result.stdout + result.stderr
     detected = _rig_time(lines, "motor off") - _rig_time(lines, f"{which} encoder")
     print(f"{fault} {which}: motor off {detected * 1e3:.0f} ms after the fault")

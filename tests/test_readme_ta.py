@@ -68,9 +68,10 @@ def test_the_noisy_link_example_runs_a_session_until_its_restart(tmp_path):
     for attempt in range(2):
         with emulator(*options, "--raise-after", "0.3") as emu:
             result = lab("--port", emu.port, "--demo", "--out", str(tmp_path / f"noisy{attempt}"), stdin="s\n", timeout=60)
-        if "watchdog" not in result.stdout:
+        if "the rig restarted" in result.stdout:
             break
-        print(f"the watchdog ended the session on this loaded host; again:\n{result.stdout[-300:]}")
+        # The real-time link lost on this shared host (watchdog, a pty stall) before the restart: again.
+        print(f"the session ended before the restart; again:\n{result.stdout[-300:]}")
     assert "the rig restarted" in result.stdout, result.stdout + result.stderr
     assert re.search(r"N = \d period\(s\) holds \(\d+ of 1000 answers late; \d+ frames from the rig corrupted", result.stdout), result.stdout
     crc = int(re.search(r"(\d+) CRC errors", result.stdout).group(1))  # type: ignore[union-attr]
