@@ -171,7 +171,7 @@ def test_lab_swings_up_the_twins_hanging_pendulum_and_holds_it(tmp_path):
     for attempt in range(2):
         out = tmp_path / f"swing{attempt}"
         with emulator("--firmware") as emu:
-            proc = lab_process("--port", emu.port, "--demo", "--swing-up", "--recentre", "--max-delay", "8", "--stop-time", "16",
+            proc = lab_process("--port", emu.port, "--demo", "--swing-up", "--recentre", "--delay", "4", "--stop-time", "16",
                                "--out", str(out))
             stdout, stderr = proc.communicate("s\n", timeout=90)
         if not any(why in stdout + stderr for why in HOST_TOO_SLOW):

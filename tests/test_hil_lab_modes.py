@@ -14,16 +14,18 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminal
 
 SWINGING, RUNNING = 6, 2
 #: lab's own verdicts on a host too slow for the link (a swamped machine), not on the rig or the modes.
-HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time", "while setting up the session")
+#: (A pseudo-terminal on a swamped machine also stalls: "link lost" is the host's, not the modes'.)
+HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time", "while setting up the session",
+                 "session ended: link lost")
 
 
-def _lab_once_more_if_the_host_was_too_slow(out, emulator_args, lab_args):
-    """One session; on a host too slow for the real-time link (printed), one more (as test_firmware_lab does)."""
-    for attempt in range(2):
+def _lab_once_more_if_the_host_was_too_slow(out, emulator_args, lab_args, *, retry=True):
+    """One session; on a host too slow for the real-time link (printed), up to two more."""
+    for attempt in range(3):
         with emulator(*emulator_args) as emu:
             result = lab("--port", emu.port, *lab_args, "--out", str(out), "--overwrite", stdin="s\n")
             text = emu.text
-        if not any(why in result.stdout + result.stderr for why in HOST_TOO_SLOW):
+        if not retry or not any(why in result.stdout + result.stderr for why in HOST_TOO_SLOW):
             break
         print(f"the host was too slow for the link (machine load), attempt {attempt + 1}: {result.stdout.strip().splitlines()[-1:]}")
     return result, text
@@ -41,7 +43,7 @@ def test_lab_swings_up_catches_and_holds_the_pendulum(tmp_path):
     """Must-show 2 (emulator): caught within 15 s, |x| <= 0.35 m, held 10 s with the demo controller."""
     out = tmp_path / "swing"
     result, _ = _lab_once_more_if_the_host_was_too_slow(
-        out, (), ("--demo", "--swing-up", "--recentre", "--max-delay", "8", "--stop-time", "17"))
+        out, (), ("--demo", "--swing-up", "--recentre", "--delay", "4", "--stop-time", "17"))  # a fixed, generous delay: no measurement
     print(result.stdout[-1500:])
     assert result.returncode == 0, result.stdout + result.stderr
     assert "swings the pendulum up" in result.stdout and "swinging up" in result.stdout and "(caught at x =" in result.stdout
@@ -60,7 +62,7 @@ def test_lab_swings_up_catches_and_holds_the_pendulum(tmp_path):
 def test_a_link_lost_during_the_swing_ends_with_the_motor_off_and_the_reason(tmp_path):
     out = tmp_path / "lost"
     # A fixed delay (no measurement): the port closes 2 s into the swing, not while the link is set up.
-    result, text = _lab_once_more_if_the_host_was_too_slow(out, ("--close-after", "3"), ("--demo", "--swing-up", "--delay", "3"))
+    result, text = _lab_once_more_if_the_host_was_too_slow(out, ("--close-after", "3"), ("--demo", "--swing-up", "--delay", "3"), retry=False)
     assert result.returncode == 1
     assert "motor off; session ended: link lost" in result.stdout
     metrics = json.loads((out / "metrics.json").read_text())
