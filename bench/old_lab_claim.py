@@ -14,7 +14,12 @@ issue's example), each run
 It prints the probability of balancing on a plausible rig (each PID, and the grid), and the share of
 grid points where the nominal verdict (balanced or not) agrees with the verdict of the majority of the
 plausible rigs: our version of "predicts stability 95 % of the time". Also the share of points where
-the nominal verdict is right on at least 95 % of the rigs.
+the nominal verdict is right on at least 95 % of the rigs. Both for "balanced" (the verdict's outcome)
+and for "stayed up" (balanced, or cut at the track limit with the pendulum still up), which is what
+the old lab's word "stable" meant.
+
+The same measure follows on a grid whose verdict changes within it: the demo controller's kernel gain
+from 10000 to 100000 (it balances at 40000).
 
 Usage::
 
@@ -33,6 +38,58 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 OLD_LAB_PIDS = ((600.0, 200.0, 5.0), (750.0, 6.0, 10.0), (1200.0, 20.0, 20.0))
 GRID = {"kp": [600, 750, 1200], "ki": [6, 20, 200], "kd": [5, 10, 20]}
+#: The demo controller's kernel gain from a quarter to 2.5 times its 40000.
+DEMO_GAINS = {"kernel.gain": [10000.0, 15000.0, 20000.0, 25000.0, 30000.0, 40000.0, 60000.0, 80000.0, 100000.0]}
+
+
+def claim(title: str, run: dict, sections: dict, samples: int, workers: int, marked: set) -> None:
+    """One grid, nominal and on ``samples`` plausible rigs: the table and the claim's numbers."""
+    import numpy as np
+
+    from pendulab.sweep import sweep
+    from pendulab.sweep.robust import robust_uncertainty, wilson_interval
+    from pendulab.sweep.spec import sweep_spec_from_dict
+
+    nominal = sweep_spec_from_dict({"run": run, **sections}, source="nominal")
+    uncertainty = robust_uncertainty(nominal.run_spec().parameters())
+    rigs = sweep_spec_from_dict({"run": run, **sections,
+                                 "uncertainty": {"samples": samples, "seed": 1, **uncertainty}}, source="rigs")
+    with tempfile.TemporaryDirectory(prefix="pendulab-old-lab-") as tmp:
+        n = sweep(nominal, Path(tmp) / "nominal", workers=workers, plots=False)
+        r = sweep(rigs, Path(tmp) / "rigs", workers=workers, plots=False)
+    points = nominal.points()
+    names = [a.name for a in nominal.axes]
+    nominal_status = n.table.column("status").to_pylist()
+    statuses = np.asarray(r.table.column("status").to_pylist()).reshape(len(points), samples)
+    print(f"\n== {title}: {len(points)} points x {samples} plausible rigs ({r.elapsed:.0f} s on {r.engine}); "
+          f"{run['stop_time']:g} s runs, poke {run['poke'][0]:g} rad/s^2 for {1e3 * run['poke'][1]:g} ms")
+    print(f"statuses on the rigs: {', '.join(f'{v} {k}' for k, v in r.counts.items() if v)}; "
+          f"nominal: {', '.join(f'{v} {k}' for k, v in n.counts.items() if v)}")
+    print("".join(f"{a:>10}" for a in names) + f"  {'nominal':<9}{'balanced on rigs':>17}  95 % CI      outcomes on the rigs")
+    for g, point in enumerate(points):
+        k = int((statuses[g] == "balanced").sum())
+        low, high = wilson_interval(k, samples)
+        outcomes = {str(s): int((statuses[g] == s).sum()) for s in sorted(set(statuses[g]))}
+        mark = "  <- old lab" if tuple(point.values()) in marked else ""
+        print("".join(f"{point[a]:>10g}" for a in names) + f"  {nominal_status[g]:<9}{100 * k / samples:>16.0f}%  "
+              f"{100 * low:3.0f}-{100 * high:3.0f} %  {outcomes}{mark}")
+    for label, good in (("balanced", lambda s: s == "balanced"), ("stayed up (balanced, or cut at the track before a fall)",
+                                                                   lambda s: s in ("balanced", "cut"))):
+        ok = np.vectorize(good)(statuses)
+        nominal_ok = np.asarray([good(s) for s in nominal_status])
+        share = ok.mean(axis=1)
+        agree = nominal_ok == (share > 0.5)
+        right95 = np.where(nominal_ok, share, 1 - share) >= 0.95
+        k = int(ok.sum())
+        low, high = wilson_interval(k, ok.size)
+        print(f"[{label}] P on a plausible rig: {100 * k / ok.size:.1f} % (95 % CI {100 * low:.1f}-{100 * high:.1f} %)", end="")
+        if marked:
+            idx = [g for g, p in enumerate(points) if tuple(p.values()) in marked]
+            k_old = int(ok[idx].sum())
+            lo, hi = wilson_interval(k_old, len(idx) * samples)
+            print(f"; the old lab's PIDs: {100 * k_old / (len(idx) * samples):.1f} % (95 % CI {100 * lo:.1f}-{100 * hi:.1f} %)", end="")
+        print(f"; the nominal verdict agrees with the rigs' majority at {int(agree.sum())}/{len(points)} points "
+              f"({100 * agree.mean():.0f} %), holds on >= 95 % of the rigs at {int(right95.sum())} ({100 * right95.mean():.0f} %)")
 
 
 def main() -> int:
@@ -41,52 +98,12 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: one per core)")
     parser.add_argument("--stop-time", type=float, default=5.0, help="seconds per run (default 5, the old lab's)")
     args = parser.parse_args()
-
-    import numpy as np
-
-    from pendulab.sweep import sweep
-    from pendulab.sweep.robust import robust_uncertainty, wilson_interval
-    from pendulab.sweep.spec import sweep_spec_from_dict
-
     run = {"pendulum": "long", "stop_time": args.stop_time, "poke": [220.0, 0.005, 1.0]}
-    controller = {"pid": {k: list(map(float, v)) for k, v in GRID.items()}}
-    nominal = sweep_spec_from_dict({"run": run, "controller": controller}, source="nominal")
-    uncertainty = robust_uncertainty(nominal.run_spec().parameters())
-    rigs = sweep_spec_from_dict({"run": run, "controller": controller,
-                                 "uncertainty": {"samples": args.samples, "seed": 1, **uncertainty}}, source="rigs")
-    with tempfile.TemporaryDirectory(prefix="pendulab-old-lab-") as tmp:
-        n = sweep(nominal, Path(tmp) / "nominal", workers=args.workers, plots=False)
-        r = sweep(rigs, Path(tmp) / "rigs", workers=args.workers, plots=False)
-    points = nominal.points()
-    nominal_status = n.table.column("status").to_pylist()
-    statuses = np.asarray(r.table.column("status").to_pylist()).reshape(len(points), args.samples)
-    balanced = statuses == "balanced"
-    print(f"{len(points)} PID points x {args.samples} plausible rigs ({r.elapsed:.0f} s on {r.engine}); "
-          f"{args.stop_time:g} s runs, poke 220 rad/s^2 for 5 ms")
-    print(f"statuses on the rigs: {', '.join(f'{v} {k}' for k, v in r.counts.items() if v)}; "
-          f"nominal: {', '.join(f'{v} {k}' for k, v in n.counts.items() if v)}")
-    print(f"{'Kp':>6}{'Ki':>6}{'Kd':>5}  {'nominal':<9}{'balanced on rigs':>18}  95 % CI     other outcomes")
-    for g, point in enumerate(points):
-        k = int(balanced[g].sum())
-        low, high = wilson_interval(k, args.samples)
-        old = "  <- old lab" if tuple(point[a] for a in ("kp", "ki", "kd")) in OLD_LAB_PIDS else ""
-        others = {s: int((statuses[g] == s).sum()) for s in ("cut", "fell", "error", "timeout") if (statuses[g] == s).any()}
-        print(f"{point['kp']:>6g}{point['ki']:>6g}{point['kd']:>5g}  {nominal_status[g]:<9}{100 * k / args.samples:>17.0f}%  "
-              f"{100 * low:3.0f}-{100 * high:3.0f} %  {others}{old}")
-    share = balanced.mean(axis=1)
-    nominal_balanced = np.asarray([s == "balanced" for s in nominal_status])
-    agree = nominal_balanced == (share > 0.5)
-    right95 = np.where(nominal_balanced, share, 1 - share) >= 0.95
-    k_all = int(balanced.sum())
-    low, high = wilson_interval(k_all, balanced.size)
-    old_idx = [g for g, p in enumerate(points) if tuple(p[a] for a in ("kp", "ki", "kd")) in OLD_LAB_PIDS]
-    k_old = int(balanced[old_idx].sum())
-    lo_old, hi_old = wilson_interval(k_old, len(old_idx) * args.samples)
-    print(f"P(balance) on a plausible rig, the old lab's three PIDs: {100 * k_old / (len(old_idx) * args.samples):.0f} % "
-          f"(95 % CI {100 * lo_old:.0f}-{100 * hi_old:.0f} %)")
-    print(f"P(balance) on a plausible rig, the 27-point grid: {100 * k_all / balanced.size:.0f} % (95 % CI {100 * low:.0f}-{100 * high:.0f} %)")
-    print(f"nominal verdict agrees with the majority of the rigs at {int(agree.sum())} of {len(points)} points "
-          f"({100 * agree.mean():.0f} %); it holds on >= 95 % of the rigs at {int(right95.sum())} ({100 * right95.mean():.0f} %)")
+    claim("the old lab's three PIDs and their grid", run, {"controller": {"pid": {k: list(map(float, v)) for k, v in GRID.items()}}},
+          args.samples, args.workers, set(OLD_LAB_PIDS))
+    # The same measure where the verdict is not the same everywhere: the demo controller's gain across
+    # the edge of its stable range under the lab's hard poke.
+    claim("the demo controller's gain across its edge", run, {"controller": {"demo": True}, "grid": DEMO_GAINS}, args.samples, args.workers, set())
     return 0
 
 
