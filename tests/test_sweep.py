@@ -101,6 +101,10 @@ def test_one_worker_two_workers_and_a_dask_local_cluster_give_one_table(spec_fil
     # Balanced, or not: cut at the track or fallen past the angle limit (the outcome of analysis.verdict).
     assert "balanced" in statuses and set(statuses) - {"balanced"} and set(statuses) <= {"balanced", "cut", "fell"}
     assert sum(result.counts.get(k, 0) for k in ("balanced", "cut", "fell")) == 16
+    # the supervisor's reason for each cut, as metrics.json gives it
+    reasons = table.column("safety_cut_reason").to_pylist()
+    assert all((r is None) == (s == "balanced") for r, s in zip(reasons, statuses))
+    assert all(r == "angle limit" for r, s in zip(reasons, statuses) if s == "fell")
     # the varied inputs are columns: the gain per point, the same 8 rigs for both points
     assert table.column("kernel.gain").to_pylist() == [20000.0] * 8 + [40000.0] * 8
     assert table.column("F1").to_pylist()[:8] == table.column("F1").to_pylist()[8:]

@@ -24,7 +24,7 @@ Examples
 >>> # skipped: starts worker processes and writes sweep-out/ (tests/test_sweep.py runs sweeps)
 >>> result = ps.sweep(spec, "sweep-out", workers=2)         # doctest: +SKIP
 >>> result.counts                                            # doctest: +SKIP
-{'balanced': 0, 'cut': 8, 'fell': 0, 'error': 0, 'timeout': 0}
+{'balanced': 0, 'cut': 8, 'fell': 0, 'not tested': 0, 'error': 0, 'timeout': 0}
 """
 
 from __future__ import annotations

@@ -106,7 +106,7 @@ def _metrics_figure(table: Any) -> Any:
     fig, grid = plt.subplots(2, 4, figsize=(15, 6.5))
     cells = grid.ravel()
     counts = [statuses.count(s) for s in STATUSES]
-    cells[0].bar(STATUSES, counts, color=["tab:green", "tab:orange", "tab:red", "tab:gray", "tab:purple"])
+    cells[0].bar([s.replace(" ", "\n") for s in STATUSES], counts, color=["tab:green", "tab:orange", "tab:red", "tab:olive", "tab:gray", "tab:purple"])
     cells[0].set_title(f"status of {len(statuses)} runs")
     for ax, name in zip(cells[1:], SHOWN):
         values = np.asarray([np.nan if v is None else v for v in table.column(name).to_pylist()], dtype=float)

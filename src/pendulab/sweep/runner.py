@@ -8,6 +8,7 @@ of its RunSpec with a :class:`~pendulab.simulation.Simulator`. A reset instance 
 trajectory, bit for bit, as a freshly loaded one (``tests/test_sweep.py``).
 
 Each run ends with a status (:data:`STATUSES`): the verdict of its response (balanced, cut, fell),
+with the supervisor's reason for a cut and the verdict's warnings beside it,
 ``error`` when the run could not be simulated (an FMU failed, a parameter was out of range), or
 ``timeout`` when it took longer than the sweep's per-run time budget.
 
@@ -31,23 +32,17 @@ from typing import Any, Mapping
 
 from pendulab.errors import UserError
 
-#: The status of a run: its verdict, or why it has none.
-STATUSES = ("balanced", "cut", "fell", "error", "timeout")
+#: The status of a run: its verdict's outcome (:mod:`pendulab.analysis.verdict`), or why it has none.
+STATUSES = ("balanced", "cut", "fell", "not tested", "error", "timeout")
 
 
 def verdict(metrics: Mapping[str, Any]) -> str:
-    """The outcome of one run from its metrics: ``balanced``, ``cut`` or ``fell``.
+    """The status of a run that was simulated: the outcome of its verdict (``metrics["verdict"]``).
 
-    The one place a sweep decides a run's verdict: the outcome of :mod:`pendulab.analysis.verdict`
-    (``metrics["verdict"]``, as ``simulate`` prints it), or, for metrics without one, the same rule on
-    ``stable`` and the cut.
+    ``balanced``, ``cut`` (the supervisor cut the motor with the pendulum still up, e.g. at the track
+    limit), ``fell`` (past the angle limit) or ``not tested`` (no poke), as ``pendulab simulate`` prints it.
     """
-    outcome = (metrics.get("verdict") or {}).get("outcome") if isinstance(metrics.get("verdict"), Mapping) else None
-    if outcome in STATUSES:
-        return str(outcome)
-    if metrics.get("stable"):
-        return "balanced"
-    return "cut" if metrics.get("safety_cut_time_s") is not None else "fell"
+    return str(metrics["verdict"]["outcome"])
 
 
 class RunTimeout(Exception):
@@ -64,7 +59,8 @@ def blank_row(spec: Any, run_id: int, point: int, sample: int, inputs: Mapping[s
     from pendulab.analysis.metrics import METRIC_KEYS
 
     return {"run_id": run_id, "point": point, "sample": sample, **{n: inputs.get(n) for n in spec.input_names},
-            "status": status, "message": message, **{k: None for k in METRIC_KEYS}, "time_s": seconds, "worker": worker_name()}
+            "status": status, "message": message, "safety_cut_reason": None, "warnings": None,
+            **{k: None for k in METRIC_KEYS}, "time_s": seconds, "worker": worker_name()}
 
 
 class BatchRunner:
@@ -113,6 +109,8 @@ class BatchRunner:
             self.close()
             status, message, metrics = "error", f"{type(exc).__name__}: {' '.join(str(exc).split())}", {}
         row = blank_row(spec, run_id, point, sample, inputs, status, message)
-        row.update({k: v for k, v in metrics.items() if k in row})
+        row.update({k: v for k, v in metrics.items() if k in row and k != "warnings"})
+        if metrics:
+            row["warnings"] = ",".join(w["kind"] for w in metrics["verdict"]["warnings"])
         row["time_s"] = time.perf_counter() - started
         return row

@@ -42,7 +42,8 @@ def schema(spec: Any) -> Any:
 
     fields = [pa.field("run_id", pa.int64()), pa.field("point", pa.int64()), pa.field("sample", pa.int64())]
     fields += [pa.field(name, pa.int64() if name == "delay" else pa.float64()) for name in spec.input_names]
-    fields += [pa.field("status", pa.string()), pa.field("message", pa.string())]
+    fields += [pa.field("status", pa.string()), pa.field("message", pa.string()),
+               pa.field("safety_cut_reason", pa.string()), pa.field("warnings", pa.string())]
     fields += [pa.field(k, pa.bool_() if k == "stable" else pa.float64()) for k in METRIC_KEYS]
     fields += [pa.field("time_s", pa.float64()), pa.field("worker", pa.string())]
     return pa.schema(fields)
