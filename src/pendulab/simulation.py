@@ -242,6 +242,13 @@ def build_system(spec: RunSpec, params: Any, *, fmu_dir: Path | None = None, cac
 
     timing = spec.timing
     supervisor = spec.supervisor_parameters()
+    if spec.plant.kind == "seesaw":
+        from pendulab.control.state_feedback import realize_state_feedback
+        from pendulab.cosim.seesaw import seesaw_system
+
+        block = realize_state_feedback(spec.controller.state_feedback, timing.step, timing.method)
+        return seesaw_system(params, block.to_parameters(), step=timing.step, supervisor=supervisor, fmu_dir=fmu_dir,
+                             delay=timing.delay)
     if spec.controller.fmu is not None:
         from pendulab.blocks.loop import block_controller_system
 

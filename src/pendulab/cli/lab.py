@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  pendulab lab --port COM3 --demo\n"
             "  pendulab lab --port /dev/ttyACM0 --controller my_controller.toml --plot --compare\n"
-            "  pendulab lab --port socket://labpc7:5555 --pid 300,100,100 --compensator 'none;4' --stop-time 30"
+            "  pendulab lab --port socket://labpc7:5555 --pid 300,100,100 --compensator 'none;4' --stop-time 30\n"
+            "  pendulab lab --port /dev/ttyACM0 --plant seesaw --demo     # hold the seesaw level, press s, let go"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -46,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     add_mode_options(parser, start=False)
     add_plant_options(parser)
+    parser.add_argument("--plant", choices=("pendulum", "seesaw"), default="pendulum",
+                        help="the rig (default pendulum); the seesaw runs a state feedback: --demo (Quanser's LQR) or "
+                             "--controller FILE from 'pendulab lqr --plant seesaw --out FILE'")
     parser.add_argument("--delay", type=int, metavar="N", help="transport delay in periods (default: measured at connection)")
     parser.add_argument("--max-delay", type=int, default=DEFAULT_MAX_DELAY, metavar="N", help=f"largest delay to accept when measuring (default {DEFAULT_MAX_DELAY})")
     parser.add_argument("--stop-time", type=float, metavar="T", help="end the session by itself T s after streaming starts")
@@ -67,8 +71,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--delay {args.delay} must be 1 to {MAX_DELAY} periods (the answer to sample k is applied at tick k + N)")
     if not 1 <= args.max_delay <= MAX_DELAY:
         raise UserError(f"--max-delay {args.max_delay} must be 1 to {MAX_DELAY} periods")
-    controller = controller_from_args(args)
-    if controller is None:
+    seesaw = args.plant == "seesaw"
+    controller = None if seesaw else controller_from_args(args)
+    if controller is None and not seesaw:
         if not sys.stdin.isatty():
             raise UserError("no controller given: use --demo, --zeros/--poles/--gain, --pid or --controller FILE (or run on a terminal to be asked)")
         from pendulab.control.prompt import prompt_controller
@@ -78,12 +83,24 @@ def run(args: argparse.Namespace) -> int:
 
     # The poke is the one --compare simulates (the rig's is detected); the supervisor waits for 's' and
     # reads the rig's encoder (0 hanging down).
-    spec = RunSpec(controller, plant=plant_from_args(args), poke=Poke.parse(args.poke) if args.poke else Poke(),
-                   timing=Timing(method=args.method),
-                   supervisor=Supervisor(rig_mode=True, auto_start=False, recentre=args.recentre, swing_up=args.swing_up)).validate()
+    if seesaw:
+        from pendulab.cli.simulate import seesaw_spec_from_args
+
+        if args.compare or args.plot:
+            raise UserError("--compare and --plot are the pendulum's in the lab; for the seesaw run 'pendulab simulate --plant seesaw "
+                            "--delay N' and compare its tilt (run.mat's theta) with the lab's")
+        # The same loop as simulated; the supervisor waits for 's' (the seesaw held level) and reads the tilt as it
+        # is (no rig_mode: its encoder reads 0 level, not the pendulum's 0 hanging).
+        spec = seesaw_spec_from_args(args, Timing(method=args.method), Poke.parse(args.poke) if args.poke else None)
+        spec = spec.replace(supervisor=Supervisor(auto_start=False)).validate()
+    else:
+        spec = RunSpec(controller, plant=plant_from_args(args), poke=Poke.parse(args.poke) if args.poke else Poke(),
+                       timing=Timing(method=args.method),
+                       supervisor=Supervisor(rig_mode=True, auto_start=False, recentre=args.recentre, swing_up=args.swing_up)).validate()
     params = spec.parameters()
+    Lp = getattr(params, "Lp", 0.0)  # (the seesaw has no pendulum: no tip column)
     check_baud(args.baud)
-    folder = run_folder(args.out, f"lab-{args.pendulum}", overwrite=args.overwrite)
+    folder = run_folder(args.out, "lab-seesaw" if seesaw else f"lab-{args.pendulum}", overwrite=args.overwrite)
     out_dir = folder.path
 
     from pendulab.hil.keys import KeySource
@@ -121,19 +138,20 @@ def run(args: argparse.Namespace) -> int:
                 link.zero()
             except LinkLost as exc:
                 raise UserError(f"{exc} (while setting up the session)") from None
-            say(f"transport delay N = {delay} ({priority}); encoders zeroed (pendulum hanging, cart centred); log streams to {out_dir / 'rig_log.csv'}")
+            pose = "seesaw held level" if seesaw else "pendulum hanging"
+            say(f"transport delay N = {delay} ({priority}); encoders zeroed ({pose}, cart centred); log streams to {out_dir / 'rig_log.csv'}")
             folder.prepare(announce=say)
             with KeySource() as keys:
-                session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=params.Lp, stop_time=args.stop_time, announce=say,
+                session = LabSession(link, system, out_dir=out_dir, keys=keys, Lp=Lp, stop_time=args.stop_time, announce=say,
                                      priority=priority)
                 reason, status = session.run()
         ending.disarm()  # the session has ended: its files are written whatever arrives now
         # As simulated: the rig's delay, the supervisor as in simulation (for --compare and the files' meta).
         spec = spec.replace(timing=dataclasses.replace(spec.timing, delay=delay),
-                            supervisor=Supervisor(recentre=args.recentre, swing_up=args.swing_up))
+                            supervisor=Supervisor() if seesaw else Supervisor(recentre=args.recentre, swing_up=args.swing_up))
         meta = {**run_meta(spec, params), "recentre": bool(args.recentre), "swing_up": bool(args.swing_up),
                 "port": args.port, "rig_boot_id": identity.boot_id}
-        metrics, timing = write_lab_results(session, Lp=params.Lp, q_alpha=1.0 / identity.pend_counts_per_rad, meta=meta, round_trips=round_trips)
+        metrics, timing = write_lab_results(session, Lp=Lp, q_alpha=1.0 / identity.pend_counts_per_rad, meta=meta, round_trips=round_trips)
         if args.plot:
             from pendulab.analysis.plots import plot_run
             from pendulab.analysis.results import read_run

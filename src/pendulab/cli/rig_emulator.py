@@ -26,15 +26,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pendulab rig-emulator --raise-after 2 --poke 220,0.005,1\n"
             "  pendulab rig-emulator --latency 1 --jitter 0.3          # a USB-serial bridge\n"
             "  pendulab rig-emulator --pendulum none --friction 2,0.004,3.5,0.04,25   # for 'pendulab calibrate --port'\n"
-            "  pendulab rig-emulator --tcp 5555                        # serve socket://127.0.0.1:5555 (Windows)"
+            "  pendulab rig-emulator --tcp 5555                        # serve socket://127.0.0.1:5555 (Windows)\n"
+            "  pendulab rig-emulator --plant seesaw --raise-after 0.3 --poke 3.3,0.1,1   # the seesaw, tapped 1 s after the start"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_plant_options(parser, pendulums=("long", "short", "none"))
+    parser.add_argument("--plant", choices=("pendulum", "seesaw"), default="pendulum",
+                        help="the rig (default pendulum); seesaw: Seesaw.fmu, its tilt on the pendulum encoder's channel "
+                             "(3 x 4096 counts per turn: the 3:1 gear), resting on its tilt stop until the hand lifts it level")
     parser.add_argument("--friction", metavar="F1,v1,F2,v2,B", help="the rig's true friction vector (overrides the calibration)")
     person = parser.add_argument_group("what a person does")
-    person.add_argument("--raise-after", type=float, metavar="S", help="raise the pendulum by hand S s after the host connects (held until the motor is enabled)")
-    person.add_argument("--poke", metavar="MAG,DUR,START", help="poke (rad/s^2, s, s); START counts from the moment the controller takes the pendulum")
+    person.add_argument("--raise-after", type=float, metavar="S",
+                        help="raise the pendulum (lift the seesaw level) by hand S s after the host connects (held until the motor is enabled)")
+    person.add_argument("--poke", metavar="MAG,DUR,START",
+                        help="poke (the seesaw: tap) (rad/s^2, s, s); START counts from the moment the controller takes the pendulum")
     link = parser.add_argument_group("what a real link and rig do")
     link.add_argument("--latency", type=float, default=0.0, metavar="MS", help="added host->rig latency in ms (default 0)")
     link.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="uniform +- jitter on that latency in ms")
@@ -95,9 +101,21 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
             friction = dict(zip(("F1", "v1", "F2", "v2", "B"), _friction(args.friction)))
         except argparse.ArgumentTypeError as exc:
             raise UserError(f"--friction {exc}") from None
+    if args.plant == "seesaw":
+        from pendulab.spec import Plant
+
+        if args.pendulum != "long":
+            raise UserError(f"--pendulum {args.pendulum} is the pendulum rig's; the seesaw has none: drop it")
+        if args.firmware is not None:
+            raise UserError("--firmware runs the pendulum rig's firmware twin; the seesaw's is not built: drop --firmware")
+        plant = Plant(kind="seesaw", cart=args.cart, calibration=str(args.calibration) if args.calibration else None,
+                      overrides=friction)
+    else:
+        plant = plant_from_args(args, **friction)
     return EmulatorOptions(
         encoder_faults=encoder_faults(args.dead_encoder, args.frozen_encoder),
-        params=plant_from_args(args, **friction).parameters(),
+        params=plant.parameters(),
+        plant=args.plant,
         raise_after=args.raise_after,
         poke=parse_poke(args.poke) if args.poke else None,
         latency=args.latency / 1000.0,
@@ -156,7 +174,8 @@ def _serve(args: argparse.Namespace, emulator: Any) -> int:
             emulator.use_socket(connection)
         else:
             print(emulator.open_pty(), flush=True)
-        emulator.say("rig emulator ready: pendulum hanging, cart centred, motor off")
+        emulator.say("rig emulator ready: " + ("seesaw on its tilt stop" if args.plant == "seesaw" else "pendulum hanging")
+                     + ", cart centred, motor off")
         why = emulator.run()
         emulator.say(f"emulator ends ({why})")
     finally:

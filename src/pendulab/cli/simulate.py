@@ -89,7 +89,7 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     timing.validate()
     poke = Poke.parse(args.poke) if args.poke else None
     if args.plant == "seesaw":
-        return _seesaw_spec(args, timing, poke)
+        return seesaw_spec_from_args(args, timing, poke)
     if args.pendulum == "none":
         raise UserError("simulate needs a pendulum: --pendulum none is the cart alone, which has nothing to balance "
                         "(for the cart alone use 'pendulab calibrate --virtual'); choose --pendulum long or short")
@@ -110,8 +110,8 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     return spec.validate()
 
 
-def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: Any) -> RunSpec:
-    """The seesaw's run: a state feedback (--demo: Quanser's LQR, or --controller FILE), the tap."""
+def seesaw_spec_from_args(args: argparse.Namespace, timing: Any, poke: Any) -> RunSpec:
+    """The seesaw's run: a state feedback (--demo: Quanser's LQR, or --controller FILE), the tap (``simulate``, ``lab``)."""
     from pendulab.control.state_feedback import design_state_feedback, load_state_feedback_file
     from pendulab.cosim.seesaw import TAP_DEFAULT
     from pendulab.spec import ControllerSpec, Plant, Poke, Quantization, RunSpec, Supervisor
@@ -123,7 +123,7 @@ def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: Any) -> RunSpec:
                         "--controller FILE from 'pendulab lqr --plant seesaw --out FILE'")
     if args.demo == bool(args.controller):
         raise UserError("--plant seesaw needs one controller: --demo (Quanser's LQR) or --controller FILE from 'pendulab lqr --plant seesaw --out FILE'")
-    if args.recentre or args.swing_up or args.start != "upright" or args.pendulum != "long":
+    if args.recentre or args.swing_up or getattr(args, "start", "upright") != "upright" or args.pendulum != "long":
         raise UserError("--recentre, --swing-up, --start and --pendulum are the pendulum's; the seesaw has none of them")
     design = design_state_feedback("seesaw") if args.demo else load_state_feedback_file(args.controller)
     spec = RunSpec(
@@ -131,7 +131,7 @@ def _seesaw_spec(args: argparse.Namespace, timing: Any, poke: Any) -> RunSpec:
         plant=Plant(kind="seesaw", cart=args.cart, calibration=str(args.calibration) if args.calibration else None),
         poke=poke or Poke(*TAP_DEFAULT),
         timing=timing,
-        quantization=Quantization(enabled=not args.no_quantization),
+        quantization=Quantization(enabled=not getattr(args, "no_quantization", False)),
         supervisor=Supervisor(),
     )
     return spec.validate()

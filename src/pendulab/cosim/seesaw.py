@@ -128,15 +128,12 @@ def simulate_seesaw(
     """:func:`pendulab.simulate` of a validated seesaw spec (``spec.plant.kind == "seesaw"``)."""
     from pendulab.analysis.metrics import compute_metrics
     from pendulab.analysis.results import SEESAW_COLUMNS
-    from pendulab.control.state_feedback import realize_state_feedback
     from pendulab.cosim.master import Master
-    from pendulab.simulation import SimulationResult, run_meta
+    from pendulab.simulation import SimulationResult, build_system, run_meta
 
     params = spec.parameters()
     timing = spec.timing
-    block = realize_state_feedback(spec.controller.state_feedback, timing.step, timing.method)
-    system = seesaw_system(params, block.to_parameters(), step=timing.step, supervisor=spec.supervisor_parameters(),
-                           fmu_dir=Path(fmu_dir) if fmu_dir is not None else None, delay=timing.delay)
+    system = build_system(spec, params, fmu_dir=Path(fmu_dir) if fmu_dir is not None else None)
     with Master(system) as master:
         log = master.run(timing.stop_time, [*RECORDED, *record], events=tuple(events), progress=progress)
     columns = {"t": np.asarray(log["time"], dtype=float)}

@@ -1,10 +1,15 @@
-"""The rig emulator: Plant.fmu behind a serial port, speaking protocol v1 in real time.
+"""The rig emulator: Plant.fmu (or Seesaw.fmu) behind a serial port, speaking protocol v1 in real time.
 
 It is a rig as ``docs/protocol.md`` describes one: its own clock samples the encoders every period,
 the answer to sample k is applied at tick k + N, the watchdog drops the motor to 0 V, the track
 limits are enforced, the encoders are quantized 16-bit counters that wrap. Around it, what a person
 and a real link do: the pendulum hangs at start and is raised by hand (``raise_after``), a poke, link
 latency and jitter, byte errors, a restart, a stall, the port closing.
+
+The seesaw (``plant="seesaw"``) is the same rig with Seesaw.fmu: its pivot encoder is on the pendulum's
+channel, 3 x 4096 counts per turn of the seesaw (the 3:1 gear, in the IDENTITY's counts per rad), 0 = level.
+It rests on a tilt stop at start; the hand (``raise_after``) lifts it level and holds it there until the
+controller has it, as it raises the pendulum.
 
 Examples
 --------
@@ -39,6 +44,17 @@ RING = 16
 DEFAULT_TRACK_LIMIT = 0.45
 #: The angle from upright (rad) at which the person holds the pendulum until the controller has it.
 HOLD_ANGLE = math.radians(0.5)
+#: The hand levels the held seesaw again every this many periods (a restart costs ~20 steps; between two it
+#: tilts by far less than one encoder count).
+HOLD_EVERY = 20
+#: The plants a rig can be: the FMU, its state variables, the parameters' tap (poke) names, the angle at which the
+#: hand holds it, and the encoder's zero in the model's angle (the pendulum's reads 0 hanging, the seesaw's 0 level).
+PLANTS: dict[str, dict[str, Any]] = {
+    "pendulum": {"fmu": "Plant", "state": ("x", "xdot", "alpha", "alphadot"), "poke": "poke", "q": "q_alpha",
+                 "hold": HOLD_ANGLE, "encoder_zero": math.pi, "gear": 1, "what": "pendulum"},
+    "seesaw": {"fmu": "Seesaw", "state": ("x", "xdot", "theta", "thetadot"), "poke": "tap", "q": "q_theta",
+               "hold": 0.0, "encoder_zero": 0.0, "gear": 3, "what": "seesaw"},
+}
 
 
 @dataclass
@@ -50,7 +66,8 @@ class EmulatorOptions:
     controller takes the pendulum (the first enabled command after the raise).
     """
 
-    params: PlantParameters = field(default_factory=PlantParameters.preset)
+    params: Any = field(default_factory=PlantParameters.preset)   # PlantParameters, or SeesawParameters for the seesaw
+    plant: str = "pendulum"       # "pendulum" (Plant.fmu) or "seesaw" (Seesaw.fmu)
     period: float = 1e-3
     raise_after: float | None = None
     poke: tuple[float, float, float] | None = None
@@ -71,15 +88,14 @@ class EmulatorOptions:
 
 
 class _Plant:
-    """Plant.fmu as a :class:`~pendulab.cosim.component.Component`; a hand can set its state (a restart)."""
+    """Plant.fmu (or Seesaw.fmu) as a :class:`~pendulab.cosim.component.Component`; a hand can set its state (a restart)."""
 
-    STATE = ("x", "xdot", "alpha", "alphadot")
-
-    def __init__(self, params: PlantParameters, period: float, state: tuple[float, float, float, float]) -> None:
+    def __init__(self, params: Any, period: float, state: tuple[float, float, float, float], kind: str = "pendulum") -> None:
         from pendulab.cosim.component import Component
         from pendulab.fmu.build import ensure_fmu
 
-        self.inst = Component("plant", ensure_fmu("Plant"), params.as_dict())
+        self.STATE = PLANTS[kind]["state"]
+        self.inst = Component("plant", ensure_fmu(PLANTS[kind]["fmu"]), params.as_dict())
         self.inst.setup(0.0, dict(zip(self.STATE, state)))
         self.params = params
         self.period = period
@@ -115,11 +131,16 @@ class RigEmulator:
             raise ValueError("byte error rate must be in [0, 1)")
         self.rng = random.Random(options.seed)
         self.announce_line = announce or (lambda text: print(text, file=sys.stderr, flush=True))
-        params = options.params.with_values(q_alpha=0.0, q_x=0.0, poke_magnitude=0.0)
-        # The pendulum hangs at rest, the cart at the centre.
-        self.plant = _Plant(params, options.period, (0.0, 0.0, math.pi, 0.0))
+        if options.plant not in PLANTS:
+            raise ValueError(f"plant {options.plant!r} is not one of {', '.join(PLANTS)}")
+        self.kind = PLANTS[options.plant]
+        params = options.params.with_values(**{self.kind["q"]: 0.0, "q_x": 0.0, self.kind["poke"] + "_magnitude": 0.0})
+        # The pendulum hangs at rest, the seesaw rests on its tilt stop (the -x end down); the cart at the centre.
+        rest = math.pi if options.plant == "pendulum" else -params.theta_stop
+        self.plant = _Plant(params, options.period, (0.0, 0.0, rest, 0.0), options.plant)
         self.counts_per_m = 1.0 / options.cart_step
-        self.counts_per_rad = options.pendulum_counts_per_rev / (2 * math.pi)
+        # The seesaw's encoder turns 3 times per turn of the seesaw (its gear): more counts per rad of tilt.
+        self.counts_per_rad = self.kind["gear"] * options.pendulum_counts_per_rev / (2 * math.pi)
         self.fd: int | None = None
         self._slave_fd: int | None = None
         self._read: Callable[[], bytes] | None = None
@@ -297,7 +318,8 @@ class RigEmulator:
             if frame.which & P.ZERO_CART:
                 self.zero_cart = self._cart_raw(x)
             if frame.which & P.ZERO_PENDULUM:
-                self.zero_pend = self._pend_raw(alpha)
+                # (the seesaw held level by the hand reads level; the held pendulum is zeroed hanging, as before)
+                self.zero_pend = self._pend_raw(self.kind["hold"] if self.held and self.o.plant == "seesaw" else alpha)
             self.send(P.Ack(self._next_seq(), P.Zero.TYPE, P.ACK_OK))
         elif isinstance(frame, P.Stream):
             if frame.on and not self.streaming:
@@ -319,8 +341,9 @@ class RigEmulator:
         return int(math.floor(x * self.counts_per_m + 0.5))
 
     def _pend_raw(self, alpha: float) -> int:
-        # The encoder reads the angle from hanging (theta = alpha - pi), counter-clockwise positive.
-        return int(math.floor((alpha - math.pi) * self.counts_per_rad + 0.5))
+        # The pendulum's encoder reads the angle from hanging (theta = alpha - pi), counter-clockwise positive;
+        # the seesaw's reads the tilt from level.
+        return int(math.floor((alpha - self.kind["encoder_zero"]) * self.counts_per_rad + 0.5))
 
     def _disable(self, why: str) -> None:
         if self.enabled or self.voltage != 0.0:
@@ -338,7 +361,7 @@ class RigEmulator:
         """One period of the firmware: choose and apply the voltage, send the sample."""
         x, _, alpha, _, _ = self.plant.state()
         if self.held:
-            alpha = HOLD_ANGLE
+            alpha = self.kind["hold"]
         cart = self._encoder("cart", self._cart_raw(x) - self.zero_cart, now)
         pend = self._encoder("pendulum", self._pend_raw(alpha) - self.zero_pend, now)
         status_late = 0
@@ -379,7 +402,9 @@ class RigEmulator:
             self._disable(f"track limit hit at x = {cart / self.counts_per_m:+.3f} m -> 0 V")
         if self.wd_tripped or self.limit_hit or self.fault:
             self.enabled, self.voltage = False, 0.0
-        if self.enabled and self.held and self.voltage != 0.0:
+        # The pendulum's hand lets go when the motor acts; the seesaw's at the start (level, with the cart centred,
+        # the controller may well command 0 V).
+        if self.enabled and self.held and (self.voltage != 0.0 or self.o.plant == "seesaw"):
             self._release()
         status = ((P.ST_ENABLED if self.enabled else 0) | (P.ST_WATCHDOG if self.wd_tripped else 0)
                   | (P.ST_LIMIT if self.limit_hit else 0) | (P.ST_FAULT if self.fault else 0) | status_late)
@@ -408,19 +433,30 @@ class RigEmulator:
     def _raise(self) -> None:
         self.held = True
         self.raised = True
-        self.say(f"pendulum raised by hand to {math.degrees(HOLD_ANGLE):.1f} deg from upright; held until the motor is enabled")
+        if self.o.plant == "seesaw":
+            # (the cart slid down the tilted track meanwhile: the person centres it, as Quanser's lab asks before a start)
+            self.plant.restart(self.plant.t, (0.0, 0.0, 0.0, 0.0))
+            self.say("seesaw lifted level off its tilt stop by hand, cart centred; held until the motor is enabled")
+        else:
+            self.say(f"pendulum raised by hand to {math.degrees(HOLD_ANGLE):.1f} deg from upright; held until the motor is enabled")
+
+    def _hold_level(self) -> None:
+        """The hand keeps the seesaw level and the cart still (motor off): the plant restarts there."""
+        x, _, _, _, _ = self.plant.state()
+        self.plant.restart(self.plant.t, (x, 0.0, 0.0, 0.0))
 
     def _release(self) -> None:
         """The controller has it: the hand lets go (the plant restarts from the held state)."""
         x, xdot, _, _, _ = self.plant.state()
         changes: dict[str, float] = {}
+        what, poke = self.kind["what"], self.kind["poke"]
         if self.o.poke is not None:
             mag, dur, start = self.o.poke
-            changes = {"poke_magnitude": mag, "poke_duration": dur, "poke_start": self.plant.t + start}
-            self.say(f"hand released, the controller has the pendulum; poke {mag:g} rad/s^2 for {dur:g} s at t = {self.plant.t + start:.3f} s")
+            changes = {f"{poke}_magnitude": mag, f"{poke}_duration": dur, f"{poke}_start": self.plant.t + start}
+            self.say(f"hand released, the controller has the {what}; {poke} {mag:g} rad/s^2 for {dur:g} s at t = {self.plant.t + start:.3f} s")
         else:
-            self.say("hand released, the controller has the pendulum")
-        self.plant.restart(self.plant.t, (x, xdot, HOLD_ANGLE, 0.0), **changes)
+            self.say(f"hand released, the controller has the {what}")
+        self.plant.restart(self.plant.t, (x, xdot, self.kind["hold"], 0.0), **changes)
         self.held = False
 
     # ------------------------------------------------------------------ the loop
@@ -505,6 +541,8 @@ class RigEmulator:
                     self.tick += 1
                 else:
                     self._tick(now)
+            if self.held and self.o.plant == "seesaw" and k % HOLD_EVERY == 0:
+                self._hold_level()
             self.plant.step(self.voltage)
             k += 1
             next_tick += period

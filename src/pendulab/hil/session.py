@@ -7,6 +7,9 @@ pendulum encoder angle theta (0 hanging down, which the supervisor converts in `
 controller's connection takes it in the upright convention), ``plant.x_measured`` the cart encoder, and
 ``plant.V`` the rig's command.
 
+The seesaw's rig stands in for ``seesaw`` (:data:`pendulab.cosim.seesaw.CONNECTIONS`): its tilt encoder (0 level,
+no conversion anywhere) feeds ``seesaw.theta_measured``, its cart encoder ``seesaw.x_measured``.
+
 Every way out (the end key, the stop time, Ctrl-C, a lost link, a rig fault, a restart, any exception)
 turns the motor off first, then saves the log with the reason.
 """
@@ -34,6 +37,8 @@ from pendulab.hil.realtime import Terminated, no_garbage_collection
 
 #: The rig's stand-in name in the wiring.
 RIG = "plant"
+#: The rig's stand-in names (the pendulum's, the seesaw's) -> the variables its angle and cart encoders feed.
+RIG_SIGNALS = {RIG: ("alpha_measured", "x_measured"), "seesaw": ("theta_measured", "x_measured")}
 #: Conversions on connections out of the rig: the controller takes the angle from upright.
 RIG_ADAPTERS: dict[tuple[str, str], Callable[[float], float]] = {
     ("plant.alpha_measured", "controller.alpha_measured"): rig_to_upright,
@@ -234,11 +239,15 @@ class LabSession:
         self.reason = ""
         self.status = 1
         self.priority = priority
+        self.rig = next((name for name in RIG_SIGNALS if name in system.components), RIG)
+        # The angle in the log's "alpha" column: the pendulum's from upright; the seesaw's tilt as measured.
+        self.seesaw = self.rig == "seesaw"
+        self.upright: Callable[[float], float] = (lambda theta: theta) if self.seesaw else rig_to_upright
 
     # ------------------------------------------------------------------ wiring
     def _wire(self, master: Master) -> None:
         """Ports and copy lists from the system's connections; the rig stands in for ``plant``."""
-        self.order = [name for name in self.system.components if name != RIG]
+        self.order = [name for name in self.system.components if name != self.rig]
         # Each input and output with its place in its port's buffers, found once (not per sample).
         Slot = tuple[str, str, int]  # "component.variable", base type, index in the port's buffer
         self.inputs: dict[str, tuple[Port, list[tuple[Slot, Callable[[float], float] | None]]]] = {}
@@ -258,9 +267,9 @@ class LabSession:
             needed = list(dict.fromkeys(needed))
             out = inst.port(needed)
             self.outputs[name] = (out, [(f"{name}.{var}", *out.index(var)) for var in needed])
-        to_rig = [c for c in self.system.connections if c.target == RIG]
+        to_rig = [c for c in self.system.connections if c.target == self.rig]
         if len(to_rig) != 1 or to_rig[0].target_variable != "V":
-            raise UserError("the lab's wiring needs exactly one connection into plant.V")
+            raise UserError(f"the lab's wiring needs exactly one connection into {self.rig}.V")
         self.voltage_source = f"{to_rig[0].source}.{to_rig[0].source_variable}"
         self.command_port = master.instances["supervisor"].port(["command"])
 
@@ -293,7 +302,7 @@ class LabSession:
 
         sub = System(step=self.period)
         for name, component in self.system.components.items():
-            if name != RIG:
+            if name != self.rig:
                 sub.add(name, component.fmu, component.start_values)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         log = RunLog(self.out_dir / "rig_log.csv", LOG_COLUMNS, flush_every=50)
@@ -313,8 +322,10 @@ class LabSession:
             link.stream(True)
             swing_up = bool(self.system.components["supervisor"].start_values.get("swing_up"))
             self.announce("streaming: press s to start, p to pause, e to end (r re-arms after a trip); " + (
+                "hold the seesaw level by hand, press s and let go: the controller has it" if self.seesaw else
                 "s swings the pendulum up from hanging, the controller takes it inside the catch window" if swing_up else
                 "raise the pendulum by hand, the controller takes it inside the capture window"))
+            angle_in, x_in = (f"{self.rig}.{name}" for name in RIG_SIGNALS[self.rig])
             # Inputs fed by a component evaluated later (the supervisor's r and engagement of the controller)
             # take that component's outputs of the previous sample; before the first, its outputs now.
             values: dict[str, float] = self._initial_outputs(master)
@@ -349,8 +360,8 @@ class LabSession:
                 prev_tick = sample.tick
                 t = (sample.tick - (first_tick or 0)) * self.period
                 x, theta = encoders.update(sample)
-                values["plant.alpha_measured"] = theta
-                values["plant.x_measured"] = x
+                values[angle_in] = theta
+                values[x_in] = x
                 command = 0
                 for key in self.keys.poll():
                     if key in KEYS:
@@ -370,7 +381,7 @@ class LabSession:
                 if sample.status & P.ST_LATE:
                     timing.late_commands += 1
                 new_state = int(values["supervisor.state"])
-                alpha = rig_to_upright(theta)
+                alpha = self.upright(theta)
                 log.append((t, sample.tick, x, theta, alpha, values["controller.V_command"], sample.voltage_mv / 1000.0,
                             new_state, sample.status, (sent - received) * 1e3, sample.late, values["supervisor.r"],
                             int(values["supervisor.recentring"])))
@@ -443,11 +454,13 @@ class RigFault(Exception):
     """The rig or an FMU reported a fault during the session."""
 
 
-def rig_columns(log_path: Path, Lp: float) -> dict[str, np.ndarray]:
+def rig_columns(log_path: Path, Lp: float, *, seesaw: bool = False) -> dict[str, np.ndarray]:
     """The run's columns (SPEC §7 names) from the streamed rig log.
 
     The rig measures no speed: ``xdot`` is the cart position's central difference over 10 ms, and
-    ``alpha`` is the measured angle (the rig has no other).
+    ``alpha`` is the measured angle (the rig has no other). The seesaw's run has the seesaw's columns
+    (:data:`pendulab.analysis.results.SEESAW_COLUMNS`): ``theta`` and ``theta_measured`` are its measured tilt,
+    ``x`` and ``x_measured`` the cart encoder.
     """
     data = np.genfromtxt(log_path, delimiter=",", names=True)
     data = np.atleast_1d(data)
@@ -461,6 +474,9 @@ def rig_columns(log_path: Path, Lp: float) -> dict[str, np.ndarray]:
         xdot[w:-w] = (x[2 * w:] - x[: -2 * w]) / (t[2 * w:] - t[: -2 * w]) if x.size > 2 * w else 0.0
     else:
         xdot = np.zeros_like(x)
+    if seesaw:
+        return {"t": t, "x": x, "xdot": xdot, "theta": alpha, "theta_measured": alpha, "x_measured": x,
+                **{name: np.asarray(data[name], dtype=float) for name in ("voltage_command", "voltage", "supervisor_state", "latency_ms")}}
     return {
         "t": t,
         "x": x,
@@ -481,21 +497,24 @@ RELEASE_SETTLE = 0.2
 #: The verdict of a session that ended before its poke (the one verdict in pendulab.analysis maps it).
 
 
-def hand_release_time(columns: dict[str, np.ndarray]) -> float | None:
+def hand_release_time(columns: dict[str, np.ndarray], *, at_start: bool = False) -> float | None:
     """When the hand let go of the pendulum: the first sample at which the controller runs and the motor acts.
 
     The person holds the raised pendulum until the controller has it, which is when the rig first
-    applies a voltage in the running state (the emulator releases it then too).
+    applies a voltage in the running state (the emulator releases it then too). The seesaw's hand
+    (``at_start``) lets go at the start: the first running sample.
     """
-    acting = np.flatnonzero((columns["supervisor_state"] == RUNNING) & (np.abs(columns["voltage"]) > 0))
+    running = columns["supervisor_state"] == RUNNING
+    acting = np.flatnonzero(running if at_start else running & (np.abs(columns["voltage"]) > 0))
     return float(columns["t"][acting[0]]) if acting.size else None
 
 
-def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: str, ended_early: bool) -> dict[str, Any]:
+def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: str, ended_early: bool,
+                seesaw: bool = False) -> dict[str, Any]:
     """The metrics of a rig session from its columns (:func:`rig_columns`).
 
     The response is read from the poke, found after the hand let go (:func:`hand_release_time`) and
-    before any cut: the supervisor's trip, or the end of a session that ended by itself
+    before any cut (the seesaw's: its tilt, released at the start): the supervisor's trip, or the end of a session that ended by itself
     (``ended_early``: the rig's watchdog, a fault, a lost link, a signal). A session cut before its
     poke has no response: every metric is None, with ``not_reported`` saying why, and the verdict (of
     :mod:`pendulab.analysis.verdict`, like every run's) ``cut`` before the poke.
@@ -520,7 +539,7 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
         cut, cut_reason = float(t[tripped[0]]), "the supervisor tripped"
     elif ended_early and t.size:
         cut, cut_reason = float(t[-1]), end_reason
-    release = hand_release_time(columns) if t.size else None
+    release = hand_release_time(columns, at_start=seesaw) if t.size else None
     poke = None
     if release is not None:
         poke = detect_poke(t, columns["alpha"], q_alpha=q_alpha, after=release + RELEASE_SETTLE, before=cut)
@@ -552,9 +571,11 @@ def write_lab_results(session: LabSession, *, Lp: float, q_alpha: float, meta: d
     from pendulab.analysis.results import write_results
     from pendulab.outputs import atomic_write
 
-    columns = rig_columns(session.log_path, Lp)
+    columns = rig_columns(session.log_path, Lp, seesaw=session.seesaw)
     t = columns["t"]
-    metrics = lab_metrics(columns, q_alpha=q_alpha, end_reason=session.reason, ended_early=session.status != 0)
+    # The seesaw's response is its tilt's (the metrics are the pendulum's, of the angle the loop holds).
+    angle = {**columns, "alpha": columns["theta"]} if session.seesaw else columns
+    metrics = lab_metrics(angle, q_alpha=q_alpha, end_reason=session.reason, ended_early=session.status != 0, seesaw=session.seesaw)
     meta = {**meta, "end_reason": session.reason, "source": "rig", "delay": session.link.delay}
     if meta.get("recentre") or meta.get("swing_up"):
         from pendulab.analysis.modes import mode_events, mode_metrics
