@@ -439,8 +439,8 @@ class LabSession:
             quiet.close()
             log.close()
             master.close()
-            timing.crc_errors = self.link.reader.errors
-            timing.lost_frames = self.link.reader.lost
+            self.timing.crc_errors = self.link.reader.errors  # (self.: an error before the loop leaves no local)
+            self.timing.lost_frames = self.link.reader.lost
         self.status = status
         self.announce(f"motor off; session ended: {self.reason}")
         return self.reason, status
