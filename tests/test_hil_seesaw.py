@@ -36,19 +36,24 @@ def _session(out):
         return result, emu.text
 
 
+#: lab's own verdicts on a host too slow for the real-time link (as in test_hil_lab_modes), not on the seesaw.
+HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it in time", "while setting up the session", "link lost")
+
+
 @pytest.fixture(scope="module")
 def seesaw_run(tmp_path_factory):
-    """One session; a second one if the first ended before its stop time.
+    """One session; up to two more if the host was too slow for the real-time link (as test_wheel does).
 
-    On a loaded host the real-time link can be lost (the lab then ends, motor off, log kept, as on a rig):
-    that is printed and the session is run once more; the test fails if that one also ends early.
+    On a loaded host the link can be lost (the lab then ends, motor off, log kept, as on a rig): that is
+    printed and the session is run again; the test fails if the last one also ends early.
     """
-    out = tmp_path_factory.mktemp("seesaw") / "run"
-    result, emu_text = _session(out)
-    if result.returncode != 0:
-        print(f"first session ended early (status {result.returncode}): {result.stdout.strip().splitlines()[-1:]}")
+    for attempt in range(3):
         out = tmp_path_factory.mktemp("seesaw") / "run"
         result, emu_text = _session(out)
+        if result.returncode == 0 or not any(why in result.stdout + result.stderr for why in HOST_TOO_SLOW):
+            break
+        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}: {result.stdout.strip().splitlines()[-1:]}"
+              f"{result.stderr.strip()[-200:]}")
     return out, result, emu_text
 
 
