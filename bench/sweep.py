@@ -13,6 +13,8 @@ with drawn friction, damping and delay; 5 s each at 1 kHz, the lab's 220 rad/s^2
   run's start values and ``Master.run`` recording the nine signals, with the systems built
   beforehand: nothing but the FMUs' stepping and the master's work around it (no controller
   discretization, no parameters to build, no metrics, no results);
+* **simulate, FMUs kept**: ``pendulab.simulate(run_spec, simulator=sim)`` in this process, the
+  sweep's per-run work without its engine (FMU instances reset, not reloaded; metrics and verdict);
 * **sweep**: :func:`pendulab.sweep.sweep` with ``--workers`` local worker processes on all the runs,
   from start to ``results.parquet``: worker start-up, FMU loading, metrics, Parquet parts and the
   final table all included.
@@ -80,7 +82,7 @@ def main() -> int:
     import pendulab
     from pendulab.cosim.master import Master
     from pendulab.cosim.pendulum import RECORDED
-    from pendulab.simulation import build_system
+    from pendulab.simulation import Simulator, build_system
     from pendulab.sweep import sweep
     from pendulab.sweep.spec import parse_sweep_spec, runs_of
 
@@ -100,6 +102,14 @@ def main() -> int:
             pendulab.simulate(run_spec)
         return (time.process_time() - t0) / len(specs)
 
+    def reused() -> float:
+        with Simulator() as sim:
+            pendulab.simulate(specs[0], simulator=sim)  # loading is not part of it
+            t0 = time.process_time()
+            for run_spec in specs:
+                pendulab.simulate(run_spec, simulator=sim)
+            return (time.process_time() - t0) / len(specs)
+
     def bare_loop() -> float:
         with Master(systems[0]) as master:
             master.run(stop, list(RECORDED))  # loading is not part of the loop
@@ -110,11 +120,12 @@ def main() -> int:
             return (time.process_time() - t0) / len(systems)
 
     one_by_one()  # warm: imports, the plan runner's library
-    single, bare = [], []
+    single, bare, reuse = [], [], []
     for _ in range(args.repeats):
         single.append(one_by_one())
         bare.append(bare_loop())
-    single_s, bare_s = statistics.median(single), statistics.median(bare)
+        reuse.append(reused())
+    single_s, bare_s, reuse_s = statistics.median(single), statistics.median(bare), statistics.median(reuse)
 
     with tempfile.TemporaryDirectory(prefix="pendulab-bench-sweep-") as tmp:
         c0, k0, w0 = time.process_time(), cpu_children(), time.perf_counter()
@@ -130,6 +141,7 @@ def main() -> int:
     print(f"{'variant':<34}{'runs per core-s':>16}{'core-ms per run':>17}")
     print(f"{'pendulab.simulate one by one':<34}{single_rate:>16.1f}{1e3 * single_s:>17.2f}")
     print(f"{'bare stepping loop':<34}{bare_rate:>16.1f}{1e3 * bare_s:>17.2f}")
+    print(f"{'simulate, FMUs kept (no engine)':<34}{1 / reuse_s:>16.1f}{1e3 * reuse_s:>17.2f}")
     print(f"{'sweep (' + str(args.workers) + ' workers, all included)':<34}{sweep_rate:>16.1f}{1e3 / sweep_rate:>17.2f}")
     print(f"sweep wall clock: {n / wall:.1f} runs/s ({wall:.1f} s for {n} runs; {core:.1f} core-s)")
     print(f"statuses: {', '.join(f'{v} {k}' for k, v in result.counts.items() if v)}")
@@ -140,6 +152,10 @@ def main() -> int:
     # The one-by-one bar's ceiling: a sweep cannot step faster than the bare loop, so it beats one-by-one
     # by at most (one-by-one time) / (bare-loop time).
     print(f"ceiling of sweep / one-by-one (one-by-one / bare loop): {single_s / bare_s:.2f}x")
+    # Where the rest goes: a run's own work beyond stepping (controller realization looked up, the
+    # plant's parameters, metrics and verdict, meta) and the engine's (batches, worker processes, Parquet).
+    print(f"per run beyond the bare loop: {1e3 * (reuse_s - bare_s):.2f} core-ms in simulate itself (metrics, verdict, "
+          f"parameters), {1e3 * (1 / sweep_rate - reuse_s):.2f} core-ms in the sweep's engine (workers, batches, Parquet)")
     return 0 if ok_single and ok_bare else 1
 
 
