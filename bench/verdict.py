@@ -165,6 +165,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"trust : {s['clean_survive']}/{s['clean']} 5 s runs balanced without warnings survive 20 s = {trust} (aim >= 95 %)")
     print(f"warned: {s['warned']}/{s['failures']} 20 s failures were flagged by the 5 s run = {warned} (aim >= 95 %)")
     print(f"(false alarms: {s['flagged_balanced_survive']} of the {s['flagged_balanced']} 5 s runs balanced with a warning survived 20 s)")
+    balanced = [r for _, r in records if r["verdicts"][5.0].outcome == "balanced"]
+    late = [r for r in balanced if r["verdicts"][20.0].outcome != "balanced"]
+    print(f"late failures (balanced at 5 s, cut or fell by 20 s): {len(late)}, flagged at 5 s: {sum(flagged(r) for r in late)}")
+    for kind in ("saturation", "chattering", "drift", "small margin"):
+        raised = [r for r in balanced if any(w.kind == kind for w in r["verdicts"][5.0].warnings)]
+        failed = sum(1 for r in raised if r["verdicts"][20.0].outcome != "balanced")
+        print(f"  {kind:12s}: on {len(raised):3d} balanced 5 s runs; {failed} of them cut or fell within 20 s")
     for case in s["false_clean"]:
         print(f"  clean at 5 s but failed at 20 s: {case.label()}")
     for case in s["missed_failures"]:

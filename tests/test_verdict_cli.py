@@ -154,3 +154,18 @@ def test_tf_calibration_says_what_the_linear_model_uses(capsys, tmp_path):
     first, note = capsys.readouterr().out.splitlines()[:2]
     assert first != "alpha/V = 5.247 s / ((s + 16.26)(s + 4.561)(s - 4.843))"
     assert "it uses Beq = 5, force_gain = 0.9" in note and "is not in it" in note
+
+
+def test_the_readme_documents_the_supervisors_codes():
+    """supervisor_state and trip_reason codes in the README are the Supervisor FMU's own."""
+    import re
+    from pathlib import Path
+
+    from pendulab.fmu.models.supervisor.config import STATES, TRIP_REASONS
+
+    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    states = readme.split("`supervisor_state` (the Supervisor FMU's `state`):", 1)[1].split("`trip_reason`:", 1)[0]
+    reasons = readme.split("`trip_reason`:", 1)[1].split(". The verdict", 1)[0]
+    for table, text in ((STATES, states), (TRIP_REASONS, reasons)):
+        found = {int(code): name for code, name in re.findall(r"(\d) ([a-z][a-z -]*?)(?= \(|,|\.|$)", text)}
+        assert found == table, (found, table)

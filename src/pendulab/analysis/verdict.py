@@ -76,7 +76,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from pendulab.fmu.models.supervisor.config import TRIP_ANGLE, TRIP_REASONS, TRIP_TRACK, TRIPPED
+from pendulab.fmu.models.supervisor.config import TRIP_ANGLE, TRIP_CATCH, TRIP_REASONS, TRIP_TRACK, TRIPPED
 
 #: Share of the time after the poke at the voltage limit that raises the saturation warning.
 SATURATION_SHARE = 0.05
@@ -99,6 +99,9 @@ FALLEN_ANGLE = math.pi / 2
 WARNING_ORDER = ("chattering", "saturation", "drift", "small margin")
 #: Warnings named on the first line; the others are listed under it.
 HEADLINE_WARNINGS = 2
+
+#: Trip reasons that mean the pendulum fell (the others cut the motor with the pendulum still up).
+FELL_REASONS = (TRIP_REASONS[TRIP_ANGLE], TRIP_REASONS[TRIP_CATCH])
 
 #: The outcomes, and their words on the first line.
 OUTCOMES = ("balanced", "cut", "fell", "not tested")
@@ -179,7 +182,8 @@ class Verdict:
         if self.outcome == "not tested":
             return "NOT TESTED: the run had no disturbance (a poke of size or length 0), so any controller stays up"
         if self.outcome == "fell":
-            where = f"the angle passed the {self._angle_limit()} limit" if self.cut_reason == "angle limit" else "the pendulum fell"
+            where = {"angle limit": f"the angle passed the {self._angle_limit()} limit",
+                     "catch missed": "the swing-up's catch missed"}.get(str(self.cut_reason), "the pendulum fell")
             text = f"FELL at t = {self.cut_time:.3f} s: {where}"
         elif self.outcome == "cut":
             text = f"CUT at t = {self.cut_time:.3f} s: {_CUT_WORDS.get(str(self.cut_reason), f'the session ended early ({self.cut_reason})')}"
@@ -284,7 +288,7 @@ def judge(
     cut_time, cut_reason = _supervisor_cut(t, columns, limits)
     outcome = "balanced"
     if cut_time is not None:
-        outcome = "fell" if cut_reason == "angle limit" else "cut"
+        outcome = "fell" if cut_reason in FELL_REASONS else "cut"
     else:
         fallen = np.flatnonzero(~np.isfinite(alpha) | (np.abs(np.nan_to_num(alpha, nan=np.inf)) >= FALLEN_ANGLE))
         if fallen.size:
@@ -506,6 +510,12 @@ def _not_reported(metrics: Mapping[str, Any], verdict: Verdict, columns: Mapping
         why = (f"no swing above the encoder's resolution ({limits.q_alpha * 1e3:.3g} mrad) after the poke" if swing <= limits.q_alpha
                else "no oscillation: the angle did not swing back after the poke")
         return {key: why for key in RESPONSE_METRICS}
+    if (metrics.get("overshoot_percent") or 0.0) > 100.0:
+        # A swing back larger than the first peak: the first peak was not the response's peak, and no
+        # decaying (second-order-like) response swings back further than it went.
+        why = (f"the swing after the first peak is larger than the peak (an overshoot of {metrics['overshoot_percent']:.0f} %): "
+               "the response is not a decaying oscillation")
+        reasons.update({key: why for key in ("natural_frequency_rad_s", "peak_time_s", "overshoot_percent")})
     largest = verdict.measures.get("largest_alpha_rad")
     t = np.asarray(columns["t"], dtype=float)
     alpha = np.asarray(columns["alpha"], dtype=float)
