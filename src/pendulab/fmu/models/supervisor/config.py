@@ -79,9 +79,10 @@ RECENTRE_R_MAX = 0.005
 RECENTRE_SLEW = 0.05
 #: Swing-up (Quanser's self-erecting pendulum): the catch window and the set point's speed limit.
 CATCH_X = 0.20
-#: Quanser's window allows 15 deg; the hand-over waits until 8 deg, from where a tip-only loop such as the demo
-#: controller holds the pendulum (from 15 deg it overshoots past the angle limit: measured, issue 21).
-CATCH_ALPHA = math.radians(8.0)
+#: Quanser's window allows 15 deg; the hand-over waits until 6 deg, from where a tip-only loop such as the demo
+#: controller holds the pendulum with the smallest cart excursion (from 15 deg it overshoots past the angle limit;
+#: from 8 deg it holds, but the cart runs 0.06 m further: measured, issue 21).
+CATCH_ALPHA = math.radians(6.0)
 CATCH_RATE = math.radians(150.0)
 SWING_SPEED_MAX = 0.7
 #: Slack (rad) on the alpha_max range so that a rounded 15 deg (0.2618 rad) is accepted.
