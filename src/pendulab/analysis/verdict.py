@@ -50,7 +50,7 @@ supervisor's ``alpha_max`` and ``x_max``), so it moves with them:
   the horizon has a third more than those 15 s for drifts that speed up (in the bench, a drift
   predicted to reach the limit 16.8 s after a 5 s run reached it after 13 s). Speeds below one
   cart-encoder step per window are not a trend.
-* **Small margin: |alpha| beyond half the angle limit, |x| beyond 75 % of the track limit.** On the
+* **Small margin: ``|alpha|`` beyond half the angle limit, ``|x|`` beyond 75 % of the track limit.** On the
   rig the poke is a hand's tap and varies by about a factor of two; a response that used more than
   half the angle limit would be cut by a tap twice as hard. The cart's excursion is mostly drift (not
   proportional to the poke), so its margin is the last quarter of the track limit (10 cm of 40 cm).
@@ -88,9 +88,9 @@ CHATTER_RATE = 10.0
 DRIFT_WINDOW = 1.0
 #: The drift warning: the cart would reach the track limit within this long after the run (s).
 DRIFT_HORIZON = 20.0
-#: Small margin: the largest |alpha| beyond this fraction of the angle limit ...
+#: Small margin: the largest ``|alpha|`` beyond this fraction of the angle limit ...
 ANGLE_MARGIN = 0.5
-#: ... or the largest |x| beyond this fraction of the track limit.
+#: ... or the largest ``|x|`` beyond this fraction of the track limit.
 TRACK_MARGIN = 0.75
 #: Without a supervisor an angle beyond this (rad) means the pendulum fell.
 FALLEN_ANGLE = math.pi / 2
@@ -369,7 +369,8 @@ def _voltage_warnings(t: np.ndarray, v: np.ndarray, span: float, limits: Limits,
             "chattering", rate, "sign changes per second",
             f"the voltage swings from beyond +{big:g} V to beyond -{big:g} V and back {rate:.0f} times a second, up to ±{peak:.3g} V "
             f"(above {CHATTER_RATE:g}/s the cart cannot follow: on the rig it shakes the cart and heats the motor)",
-            "lower the gain or add a low-pass compensator (a pole near -80) so that the loop is slower than the voltage can switch",
+            "lower the gain until the sampled linear loop is stable (the 'linear model' line), or roll the controller off "
+            "sooner (one more filter pole, e.g. a compensator 'none;-80')",
             f"the voltage chatters at ±{peak:.2g} V",
         ))
     return out
@@ -383,13 +384,13 @@ def _cart_and_margin_warnings(t: np.ndarray, alpha: np.ndarray | None, x: np.nda
         measures["largest_alpha_rad"] = largest_alpha
     small: list[str] = []
     if largest_alpha > ANGLE_MARGIN * limits.alpha_max:
-        small.append(f"|alpha| reached {math.degrees(largest_alpha):.1f}° of the {math.degrees(limits.alpha_max):.0f}° limit")
+        small.append(f"the angle reached {math.degrees(largest_alpha):.1f}° of the {math.degrees(limits.alpha_max):.0f}° limit")
     if x is not None:
         x = np.nan_to_num(x)
         largest_x = float(np.max(np.abs(x)))
         measures["largest_x_m"] = largest_x
         if largest_x > TRACK_MARGIN * limits.x_max:
-            small.append(f"|x| reached {largest_x:.3f} m of the {limits.x_max:.2f} m track limit")
+            small.append(f"the cart reached {largest_x:.3f} m of the {limits.x_max:.2f} m track limit")
         # The cart's trend: a straight line through the last DRIFT_WINDOW s.
         tail = t >= t[-1] - DRIFT_WINDOW
         if tail.sum() >= 3:
