@@ -107,7 +107,8 @@ def test_fit_malformed_logs_one_line_exit_2_nothing_written(capsys, tmp_path):
     out_dir.mkdir()
     for name, (path, words) in bad_logs(logs).items():
         status, _, err = run(capsys, "fit", str(path), "--out", str(out_dir / "fit.json"), "--plot", str(out_dir / "fit.png"))
-        assert status == 2, name
+        # A cart that never moves is a log that determines nothing: exit 3, saying what to record instead.
+        assert status == (3 if name == "never moves" else 2), name
         assert words in err and err.count("\n") == 1 and err.startswith("pendulab: error:"), (name, err)
         assert only_file(out_dir) == [], name
 

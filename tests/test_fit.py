@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
-from pendulab.calibration.fit import fit_parameters, plot_fit
+from pendulab.calibration.fit import fit_parameters, plot_fit, ramp_start
 from pendulab.calibration.logs import RampLog
-from pendulab.calibration.synthetic import TEST_RIG, synthetic_ramp_log
-from pendulab.errors import CalibrationError
+from pendulab.calibration.synthetic import TEST_RIG, calibrate_ramp_log
+from pendulab.errors import CalibrationError, FitRejected
 from pendulab.model.parameters import PlantParameters
 
 TRUE = TEST_RIG
@@ -16,33 +18,46 @@ TRUE = TEST_RIG
 
 @pytest.fixture(scope="module")
 def result():
-    log = synthetic_ramp_log(TRUE, iterations=1, noise=1e-5, seed=3)
+    log = calibrate_ramp_log(TRUE, iterations=1, noise=1e-5, seed=3)
     counts = log.x / TRUE.q_x
     assert np.allclose(counts, np.round(counts))  # quantized to the encoder step
-    return fit_parameters([log], PlantParameters.preset("none"))  # starts from the lab defaults
+    return log, fit_parameters([log], PlantParameters.preset("none"))  # from the lab defaults and the log's ramps
 
 
 def test_fit_recovers_Beq_force_gain_and_F1(result):
-    assert result.success
+    log, result = result
+    assert result.forward_ok
     assert abs(result.values["Beq"] / TRUE.Beq - 1) < 0.05
     assert abs(result.values["force_gain"] / TRUE.force_gain - 1) < 0.05
     assert abs(result.values["F1"] / TRUE.F1 - 1) < 0.10
     # The start was far away: this is a real fit, not the defaults left alone.
-    assert result.initial["Beq"] == 4.3 and result.initial["force_gain"] == 1.0 and result.initial["F1"] == 1.5
+    assert result.initial["Beq"] == 4.3 and result.initial["force_gain"] == 1.0
+    # The friction starts where the one start rule puts it (the ramp extraction), as 'pendulab fit' does.
+    start, _ = ramp_start([log], PlantParameters.preset("none"))
+    assert result.initial["F1"] == start.F1 != 1.5
 
 
-def test_fit_reports_uncertainty_and_residual(result):
+def test_fit_reports_what_the_log_determines_its_uncertainty_and_residual(result):
+    _, result = result
     for name in result.names:
-        assert 0 < result.uncertainty[name] < abs(result.values[name])
+        if result.determination[name] == "determined":
+            assert 0 < result.uncertainty[name] < abs(result.values[name])
+        else:  # bounded or not identified: no uncertainty, a range instead
+            assert result.uncertainty[name] == math.inf and result.allowed[name] != (0.0, math.inf)
+            assert result.determination[name] == "bounded" or result.values[name] == result.initial[name]
+    # A ramp test shows the drive, the drag and the breakaway.
+    assert all(result.determination[n] == "determined" for n in ("Beq", "force_gain", "F1"))
     assert 1e-6 < result.residual_rms < 1e-4  # about the noise (10 um) and the encoder step
     assert result.params.Beq == result.values["Beq"]
     cal = result.to_calibration(rig="test")
     assert cal.Beq == result.values["Beq"] and cal.force_gain == result.values["force_gain"]
     assert cal.friction[0] == result.values["F1"]
-    assert "Beq" in result.summary()
+    assert cal.metadata["determination"] == result.determination
+    assert "Beq" in result.summary() and "determined" in result.summary()
 
 
 def test_plot_of_measured_against_refitted_motion(result, tmp_path):
+    _, result = result
     path = plot_fit(result, tmp_path / "fit.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     curve = result.curves[0]
@@ -52,7 +67,7 @@ def test_plot_of_measured_against_refitted_motion(result, tmp_path):
 def test_fit_errors_are_user_errors():
     t = np.arange(3000) * 1e-3
     still = RampLog(t, np.where(t > 1, 0.3, 0.0), np.zeros_like(t), source="still.csv")
-    with pytest.raises(CalibrationError, match="never moves"):
+    with pytest.raises(FitRejected, match="never moves.*determines nothing; record slow voltage ramps"):
         fit_parameters([still])
     short = RampLog(t[:15], np.linspace(0, 1, 15), np.linspace(0, 1e-3, 15), source="short.csv")
     with pytest.raises(CalibrationError, match="too short"):

@@ -3,6 +3,7 @@ answer is not a calibration (not identifiable, or a replay far from the log), ol
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -11,9 +12,9 @@ import scipy.io
 
 from pendulab.calibration._simulation import simulate
 from pendulab.calibration.files import load_calibration
-from pendulab.calibration.fit import fit_parameters
+from pendulab.calibration.fit import fit_parameters, ramp_start
 from pendulab.calibration.logs import RampLog, write_log
-from pendulab.calibration.synthetic import TEST_RIG, synthetic_ramp_log
+from pendulab.calibration.synthetic import TEST_RIG, calibrate_ramp_log
 from pendulab.cli.main import main
 from pendulab.errors import FitRejected
 from pendulab.model.parameters import PlantParameters
@@ -29,7 +30,7 @@ def run(capsys, *argv: str) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="module")
 def ramp_log(tmp_path_factory):
-    log = synthetic_ramp_log(TRUE, iterations=1, noise=1e-5, seed=3)
+    log = calibrate_ramp_log(TRUE, iterations=1, noise=1e-5, seed=3)
     path = tmp_path_factory.mktemp("logs") / "ramp.csv"
     write_log(log, path)
     return log, path
@@ -57,6 +58,15 @@ def test_forward_check_is_reported_stored_and_matches_an_independent_replay(caps
     assert rms <= forward_rms(fitted, log) + 5 * TRUE.q_x
     # The true values replay the log to the noise and the encoder step: the check can tell.
     assert forward_rms(TRUE, log) < 2 * TRUE.q_x
+    # The file says, for each parameter, whether the log determined it; what it did not identify holds
+    # its start value and is listed as such. The start is the API's own rule (the ramp extraction).
+    assert set(meta["determination"]) == set(meta["fitted"])
+    assert set(meta["determination"].values()) <= {"determined", "bounded", "not identified"}
+    assert meta["kept_start_value"] == [n for n, s in meta["determination"].items() if s == "not identified"]
+    for name, status in meta["determination"].items():
+        assert (meta["uncertainty"][name] is None) == (status != "determined")
+    start, _ = ramp_start([log], PlantParameters.preset("none"))
+    assert meta["initial"]["F1"] == pytest.approx(start.F1, rel=1e-9)  # the CSV keeps 15 digits
 
 
 def test_a_fit_that_cannot_reproduce_the_log_exits_3_and_writes_no_calibration(capsys, ramp_log, tmp_path):
@@ -76,9 +86,17 @@ def test_a_constant_voltage_cannot_identify_the_parameters(capsys, tmp_path):
     path = write_log(RampLog(t, np.full(t.size, 4.0), x), tmp_path / "constant.csv")
     out = tmp_path / "fit.json"
     status, _, err = run(capsys, "fit", str(path), "--out", str(out))
-    assert status == 3 and err.count("\n") == 1 and "voltage is constant" in err and not out.exists()
+    assert status == 3 and err.count("\n") == 1 and "voltage is constant" in err and "record slow voltage ramps" in err and not out.exists()
     with pytest.raises(FitRejected, match="cannot be told apart"):
         fit_parameters([RampLog(t, np.full(t.size, 4.0), x)])
+
+
+def test_a_cart_that_never_moves_exits_3_saying_what_to_record(capsys, tmp_path):
+    t = np.arange(0.0, 3.0, 1e-3)
+    path = write_log(RampLog(t, np.where(t > 1, 0.3, 0.0), np.zeros_like(t)), tmp_path / "still.csv")
+    status, _, err = run(capsys, "fit", str(path), "--out", str(tmp_path / "fit.json"))
+    assert status == 3 and err.count("\n") == 1 and "never moves" in err and "record slow voltage ramps" in err
+    assert not (tmp_path / "fit.json").exists()
 
 
 def test_fit_reads_an_old_lab_log_folder_like_the_same_log_as_csv(capsys, ramp_log, tmp_path):

@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 import pytest
-from fit_logs import RIGS as ALL_RIGS
-from fit_logs import TRUE, synthetic_log
 
 from pendulab.calibration import _polish
 from pendulab.calibration._replay import replay
 from pendulab.calibration._start import breakaway_voltage, drive_and_drag, log_start
 from pendulab.calibration.extract import motor_constants
 from pendulab.calibration.fit import _initial_states, _noise_level
+from pendulab.calibration.synthetic import RIGS as ALL_RIGS
+from pendulab.calibration.synthetic import TRUE, synthetic_log
 from pendulab.model.parameters import PlantParameters
 
 RIGS = {name: rig for name, rig in ALL_RIGS.items() if name != "unseen"}
@@ -25,7 +25,7 @@ def anchors_of(log, step: float) -> _polish.Anchors:
     return _polish.anchors(log, used, _initial_states(log, False)[:used:10].T, 10, np.array([_noise_level(log.x[:used])]), step, False)
 
 
-@pytest.mark.parametrize("shape", ["fast steps", "sine sweep", "ramps with rests"])
+@pytest.mark.parametrize("shape", ["random steps", "chirp", "ramps with rests"])
 @pytest.mark.parametrize("rig", list(RIGS))
 def test_drive_and_drag_come_from_fast_motion_of_any_shape(rig, shape):
     true = RIGS[rig]
@@ -61,7 +61,7 @@ def test_a_log_starting_at_rest_replays_from_rest_not_from_a_smoothed_speed():
     # The smoothed speed at a log's first sample is off by millimetres per second (the filter's edge);
     # a stuck cart would carry that as a lasting offset of v * Mc/Beq.
     true = RIGS["sticky"]
-    log = synthetic_log("fast steps", true, duration=10.0, voltage_noise=0.0)
+    log = synthetic_log("random steps", true, duration=10.0, voltage_noise=0.0)
     assert abs(_initial_states(log, False)[0, 1]) > 5e-4  # the smoothed speed at sample 0 (the true one is 0)
     a = anchors_of(log, true.q_x)
     assert abs(a.x0[1]) < 3e-4
@@ -72,21 +72,21 @@ def test_a_log_starting_at_rest_replays_from_rest_not_from_a_smoothed_speed():
 def test_the_voltage_noise_estimate_ignores_steps_ramps_and_sines():
     rng = np.random.default_rng(3)
     t = np.arange(20000) * 1e-3
-    for clean in (synthetic_log("fast steps", duration=20.0, voltage_noise=0.0).V, np.clip(3 * t % 4, 0, 3), 3 * np.sin(2 * np.pi * 0.5 * t)):
+    for clean in (synthetic_log("random steps", duration=20.0, voltage_noise=0.0).V, np.clip(3 * t % 4, 0, 3), 3 * np.sin(2 * np.pi * 0.5 * t)):
         assert _polish.voltage_noise(clean) < 1e-4
         noisy = clean + rng.normal(0.0, 0.01, clean.size)
         assert _polish.voltage_noise(noisy) == pytest.approx(0.01, rel=0.15)
 
 
-def test_a_noisy_logged_voltage_is_replayed_through_a_median_filter_that_keeps_its_steps():
+def test_a_noisy_logged_voltage_is_denoised_keeping_its_steps():
     true = TRUE
-    clean = synthetic_log("fast steps", true, duration=20.0, voltage_noise=0.0)
-    noisy = synthetic_log("fast steps", true, duration=20.0, voltage_noise=0.01)
+    clean = synthetic_log("random steps", true, duration=20.0, voltage_noise=0.0)
+    noisy = synthetic_log("random steps", true, duration=20.0, voltage_noise=0.01)
     filtered = _polish.denoised_voltage(noisy.V)
     # Steps stay steps (no smearing across an edge), and the noise drops.
     assert np.mean(np.abs(filtered - clean.V)) < 0.5 * np.mean(np.abs(noisy.V - clean.V))
     # This log holds a level 1 % below the breakaway force: the raw noisy voltage breaks the cart away
-    # in the replay of the true values (tens of encoder steps), the filtered one does not.
+    # in the replay of the true values (tens of encoder steps), the denoised one does not.
     a = anchors_of(noisy, true.q_x)
 
     def rms(V: np.ndarray) -> float:
@@ -95,3 +95,27 @@ def test_a_noisy_logged_voltage_is_replayed_through_a_median_filter_that_keeps_i
 
     assert rms(a.V) > 10
     assert rms(filtered[: a.n]) < 2
+
+
+@pytest.mark.parametrize("rig", ["unseen", "sticky"])
+def test_a_slow_ramp_log_with_10_mV_of_noise_replays_better_denoised_than_through_a_median(rig):
+    # Slow ramps with holds: a 9-sample median keeps the steps but turns a slow ramp into a staircase of
+    # the noise's size; the trend filter keeps ramps, holds and their corners. (Measured, true values'
+    # replay in encoder steps, unseen / sticky: noise-free 0.92 / 0.65, raw 6.4 / 17.1, median 2.4 / 10.8,
+    # denoised 1.2 / 3.1: better, not yet as good as noise-free on the sticky rig.)
+    from scipy.ndimage import median_filter
+
+    true = ALL_RIGS[rig]
+    clean = synthetic_log("ramps with holds", true, duration=16.0, voltage_noise=0.0)
+    noisy = synthetic_log("ramps with holds", true, duration=16.0, voltage_noise=0.01)
+    V = _polish.denoised_voltage(noisy.V)
+    assert np.sqrt(np.mean((V - clean.V) ** 2)) < 2.5e-3  # measured 1.1 and 1.7 mV of the 10
+    a = anchors_of(noisy, true.q_x)
+
+    def rms(V: np.ndarray) -> float:
+        x = replay([true], V[: a.n], a.t, a.x0, a.restarts)[0, :, 0]
+        return math.sqrt(np.mean((x - a.measured[:, 0]) ** 2)) / true.q_x
+
+    denoised = rms(V)
+    assert denoised < 0.75 * rms(median_filter(noisy.V, size=9, mode="nearest"))
+    assert denoised < 0.4 * rms(noisy.V)

@@ -11,11 +11,11 @@ finally judged by, a replay of every log through the plant with the law's switch
   :data:`UNSTABLE_WINDOW` seconds from the fit's state estimate;
 * **polish** (:func:`polish`): scans of the thresholds, then a pattern search on the replay's
   position (and angle) errors, each step trying all its moves in one batched replay;
-* **uncertainty** (:func:`part_spread`, :func:`profile_width`): the logs are cut into parts at
-  restarts, the polish is repeated on each part from the answer, and the spread of the parts' answers
-  gives the standard uncertainty (a jackknife over the parts), at least the width of the cost's
-  profile around the answer. It measures what a different stretch of log would have said, which the
-  residual's noise level, strongly correlated along a replay, does not.
+* **what the replay says back** (:func:`profile`): the replay cost along each parameter around the
+  answer says whether the logs determine it (the cost rises both ways), only bound it (one way) or do
+  not identify it (flat), and gives its standard uncertainty (where the cost has risen by one effective
+  chi-square unit, the errors' correlation along a replay counted), at least the linearized covariance
+  of the determined parameters (which keeps those that trade off, ``Beq`` and the force gain).
 """
 
 from __future__ import annotations
@@ -132,10 +132,8 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
     )
 
 
-#: Logged voltage noise (V, robust estimate) above which a median-filtered voltage is also tried.
+#: Logged voltage noise (V, robust estimate) above which the denoised voltage is also tried.
 VOLTAGE_NOISE = 1e-3
-#: The median filter's length (samples): it keeps steps and ramps, and takes the sample noise down about 2.3 times.
-VOLTAGE_MEDIAN = 9
 
 
 def voltage_noise(V: np.ndarray) -> float:
@@ -150,11 +148,104 @@ def voltage_noise(V: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6))
 
 
-def denoised_voltage(V: np.ndarray) -> np.ndarray:
-    """The logged voltage through a :data:`VOLTAGE_MEDIAN`-sample median filter (edges kept)."""
-    from scipy.ndimage import median_filter
+#: Jumps larger than this many noise sigmas split the voltage before trend filtering (they are steps).
+JUMP_SIGMAS = 5.0
+#: L1 trend filter's weight, in noise sigmas.
+TREND_WEIGHT = 100.0
 
-    return median_filter(np.asarray(V, dtype=float), size=VOLTAGE_MEDIAN, mode="nearest")
+
+def trend_filter(y: np.ndarray, weight: float, tol: float = 1e-4, max_iter: int = 60) -> np.ndarray:
+    """L1 trend filtering: ``argmin 1/2 |y - x|^2 + weight |D2 x|_1`` (a piecewise-linear estimate).
+
+    The primal-dual interior-point method of Kim, Koh, Boyd and Gorinevsky (SIAM Review 51, 2009) on
+    the dual, a box-constrained quadratic problem; each Newton step solves one pentadiagonal system.
+
+    Examples
+    --------
+    >>> ramp = np.r_[np.zeros(50), np.linspace(0, 1, 100), np.ones(50)]
+    >>> noisy = ramp + np.random.default_rng(0).normal(0, 0.01, ramp.size)
+    >>> bool(np.sqrt(np.mean((trend_filter(noisy, 0.3) - ramp) ** 2)) < 0.004)  # the noise: 0.0096
+    True
+    """
+    from scipy.linalg import solveh_banded
+
+    y = np.asarray(y, dtype=float)
+    n, lam = len(y), float(weight)
+    if n < 5:
+        return y.copy()
+    m = n - 2
+
+    def D(x: np.ndarray) -> np.ndarray:
+        return x[:-2] - 2 * x[1:-1] + x[2:]
+
+    def DT(z: np.ndarray) -> np.ndarray:
+        out = np.zeros(n)
+        out[:-2] += z
+        out[1:-1] -= 2 * z
+        out[2:] += z
+        return out
+
+    def banded(diagonal: np.ndarray | float) -> np.ndarray:  # D D^T + diag, upper banded form
+        ab = np.zeros((3, m))
+        ab[2], ab[1, 1:], ab[0, 2:] = 6.0 + diagonal, -4.0, 1.0
+        return ab
+
+    def dot(a: np.ndarray, b: np.ndarray) -> float:  # not BLAS: its threads spin on a busy machine
+        return float(np.sum(a * b))
+
+    Dy = D(y)
+    z, mu1, mu2 = np.zeros(m), np.ones(m), np.ones(m)
+    t, step, dual = 1e-10, math.inf, 0.0
+    for _ in range(max_iter):
+        f1, f2 = z - lam, -z - lam
+        DTz = DT(z)
+        DDTz = D(DTz)
+        w = Dy - (mu1 - mu2)
+        primal = min(0.5 * dot(w, solveh_banded(banded(0.0), w)) + lam * np.sum(mu1 + mu2),
+                     0.5 * dot(DTz, DTz) + lam * np.sum(np.abs(Dy - DDTz)))
+        dual = max(-0.5 * dot(DTz, DTz) + dot(Dy, z), dual)
+        gap = primal - dual
+        if gap <= tol * max(1.0, abs(dual)):
+            break
+        if step >= 0.2:
+            t = max(4.0 * m / gap, 1.2 * t)
+        dz = solveh_banded(banded(-(mu1 / f1 + mu2 / f2)), -DDTz + Dy + (1 / t) / f1 - (1 / t) / f2)
+        dmu1 = -(mu1 + ((1 / t) + dz * mu1) / f1)
+        dmu2 = -(mu2 + ((1 / t) - dz * mu2) / f2)
+        residual = math.sqrt(dot(DDTz - w, DDTz - w) + dot(mu1 * f1 + 1 / t, mu1 * f1 + 1 / t) + dot(mu2 * f2 + 1 / t, mu2 * f2 + 1 / t))
+        step = 1.0
+        for mu, dmu in ((mu1, dmu1), (mu2, dmu2)):
+            if np.any(dmu < 0):
+                step = min(step, 0.99 * float(np.min(-mu[dmu < 0] / dmu[dmu < 0])))
+        for _ in range(40):  # backtracking: stay strictly feasible and lower the residual
+            nz, nmu1, nmu2 = z + step * dz, mu1 + step * dmu1, mu2 + step * dmu2
+            nf1, nf2 = nz - lam, -nz - lam
+            if max(nf1.max(), nf2.max()) < 0:
+                r_new = D(DT(nz)) - Dy + nmu1 - nmu2
+                new = math.sqrt(dot(r_new, r_new) + dot(nmu1 * nf1 + 1 / t, nmu1 * nf1 + 1 / t) + dot(nmu2 * nf2 + 1 / t, nmu2 * nf2 + 1 / t))
+                if new <= (1 - 0.01 * step) * residual:
+                    break
+            step *= 0.5
+        z, mu1, mu2 = nz, nmu1, nmu2
+    return y - DT(z)
+
+
+def denoised_voltage(V: np.ndarray) -> np.ndarray:
+    """The applied voltage estimated from a noisy logged one, keeping its steps and its ramps.
+
+    The voltage is split at jumps of more than :data:`JUMP_SIGMAS` noise sigmas (steps), and each piece
+    goes through :func:`trend_filter` (piecewise linear: ramps, holds and their corners stay). A
+    9-sample median would keep steps but round a slow ramp into a staircase of the noise's size.
+    """
+    V = np.asarray(V, dtype=float)
+    sigma = voltage_noise(V)
+    if sigma <= 0:
+        return V.copy()
+    cuts = np.r_[0, np.flatnonzero(np.abs(np.diff(V)) > JUMP_SIGMAS * math.sqrt(2) * sigma) + 1, len(V)]
+    out = V.copy()
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        out[a:b] = trend_filter(V[a:b], TREND_WEIGHT * sigma) if b - a >= 5 else np.median(V[a:b])
+    return out
 
 
 def denoised(a: Anchors) -> Anchors:
@@ -375,113 +466,36 @@ def refine_pairs(
     return theta, cost
 
 
-def log_parts(logs: list[Anchors], n_parts: int) -> list[list[Anchors]]:
-    """The logs cut into ``n_parts`` stretches of about equal length, each starting at a known state."""
-    total = sum(a.n for a in logs)
-    bounds = np.linspace(0, total, n_parts + 1)
-    parts: list[list[Anchors]] = [[] for _ in range(n_parts)]
-    offset = 0
-    for a in logs:
-        cuts = np.r_[a.segments, a.n]
-        # The part of each stretch between rests, by where its middle falls; then one crop per run of stretches.
-        owner = np.minimum(np.searchsorted(bounds, offset + 0.5 * (cuts[:-1] + cuts[1:]), side="right") - 1, n_parts - 1)
-        start = 0
-        for s in range(1, len(owner) + 1):
-            if s == len(owner) or owner[s] != owner[start]:
-                parts[int(owner[start])].append(a.crop(int(cuts[start]), int(cuts[s])))
-                start = s
-        offset += a.n
-    return [p for p in parts if p]
+# ---------------------------------------------------------------------- what the replay says back
+#: Log-offsets of the profile (each side): 0.3 % to a factor 2.
+PROFILE_OFFSETS = (0.003, 0.01, 0.03, 0.1, 0.3, 0.7)
+DETERMINED, BOUNDED, NOT_IDENTIFIED = "determined", "bounded", "not identified"
+#: A parameter whose uncertainty exceeds this fraction of its value is reported as bounded, not determined.
+MAX_RELATIVE_SIGMA = 0.5
 
 
-def part_spread(
-    logs: list[Anchors],
-    space: Space,
-    theta: np.ndarray,
-    n_parts: int = 4,
-    max_iter: int = 6,
-    resolution: float = 3e-4,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Standard uncertainty of ``theta`` from refits on parts of the logs (None if they cannot be cut).
+@dataclass(frozen=True)
+class Profile:
+    """Per parameter: status, standard uncertainty (scaled; inf unless determined) and the range the
+    replay allows, ``(low, high)`` scaled (``0`` or ``inf`` where the cost never rose)."""
 
-    Each part is polished on its own from ``theta``; with ``K`` parts, each holding ``1/K`` of the
-    data, the whole logs' answer varies ``sqrt(K)`` times less than the parts' answers do. The search
-    stops at steps of ``resolution`` (relative), which is also the smallest spread reported.
+    status: tuple[str, ...]
+    sigma: np.ndarray
+    allowed: tuple[tuple[float, float], ...]
+    threshold: float
+    correlation: float
 
-    Returns
-    -------
-    sigma, estimates
-        The standard uncertainty of each scaled parameter and the parts' answers ``(K, n)``.
+
+def correlation_length(residuals: np.ndarray, sizes: list[int]) -> float:
+    """``1 + 2 sum(autocorrelation)`` up to its first zero, sample-weighted over the logs (>= 1).
+
+    A replay's errors come in runs (a breakaway a millisecond late is off for a while), so ``N``
+    errors hold about ``N / k`` independent ones.
     """
-    parts = log_parts(logs, n_parts)
-    if len(parts) < 2:
-        return None
-    estimates = np.array([
-        polish(part, space, theta, max_iter=max_iter, first_step=0.01, min_step=resolution, scan=()).theta
-        for part in parts
-    ])
-    spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(parts))
-    return np.maximum(spread, resolution * np.abs(theta)), estimates
-
-
-#: Relative offsets of the profile scan around the answer (each side).
-PROFILE_OFFSETS = (0.001, 0.003, 0.01, 0.03, 0.1)
-
-
-def profile_width(logs: list[Anchors], space: Space, theta: np.ndarray) -> np.ndarray:
-    """How far each parameter can move, the others kept, before the replay gets worse (scaled units).
-
-    (The prior is left out: it is negligible against the logs.)
-
-    A threshold the logs never cross (no push between two breakaway forces, say) leaves the cost flat
-    over a range; refits of parts then agree and their spread says nothing. Here each parameter is
-    moved by :data:`PROFILE_OFFSETS` both ways in one batched replay, and the half-width is the largest
-    offset at which the cost stays within ``cost / segments`` of the answer's (the cost of one of the
-    roughly independent stretches between restarts).
-    """
-    n = len(theta)
-    offsets = np.array([s * o for o in PROFILE_OFFSETS for s in (-1.0, 1.0)])
-    trials = [theta.copy()]
-    for j in range(n):
-        for o in offsets:
-            th = theta.copy()
-            th[j] = theta[j] * (1.0 + o) if abs(theta[j]) > 1e-12 else o
-            trials.append(np.clip(th, space.lower, space.upper))
-    R = replay_errors(logs, space.vectors(np.array(trials)), space.names)
-    costs = np.einsum("ij,ij->i", R, R)
-    segments = sum(len(a.segments) for a in logs)
-    limit = costs[0] * (1.0 + 1.0 / max(segments, 1))
-    widths = np.zeros(n)
-    for j in range(n):
-        c = costs[1 + j * len(offsets) : 1 + (j + 1) * len(offsets)]
-        inside = np.abs(offsets[c <= limit])
-        widths[j] = (inside.max() if inside.size else 0.0) * abs(theta[j])
-    return widths
-
-
-def linearized_sigma(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 3e-3) -> np.ndarray:
-    """Standard uncertainty of ``theta`` from the replay's linearization, with correlated errors.
-
-    ``sqrt(diag((J^T J)^-1)) * s * sqrt(k)``: ``J`` is the replay errors' Jacobian by central
-    differences (relative ``step``, one batched replay), ``s`` the RMS error at ``theta`` and ``k``
-    the errors' correlation length in samples (a replay's errors come in runs, not independently).
-    The inverse keeps the correlations between parameters that a refit of parts, started from the
-    answer, misses: ``Beq`` and the force gain off together by a per cent leave the steady speeds
-    unchanged.
-    """
-    n = len(theta)
-    size = step * np.maximum(np.abs(theta), 1e-2)
-    trials = np.vstack([theta, theta + np.diag(size), theta - np.diag(size)])
-    R = np.nan_to_num(replay_errors(logs, space.vectors(trials), space.names), nan=0.0)
-    r0 = R[0]
-    J = ((R[1 : n + 1] - R[n + 1 :]) / (2 * size[:, None])).T
-    s2 = float(np.mean(r0**2))
-    # Correlation length: 1 + 2 * the sum of the autocorrelation up to its first zero (per log, sample-weighted).
-    lengths, weights = [], []
-    offset = 0
-    for a in logs:
-        e = r0[offset : offset + a.measured.size]
-        offset += a.measured.size
+    lengths, weights, offset = [], [], 0
+    for size in sizes:
+        e = residuals[offset : offset + size]
+        offset += size
         e = e - e.mean()
         if e.size < 4 or not np.any(e):
             continue
@@ -491,9 +505,64 @@ def linearized_sigma(logs: list[Anchors], space: Space, theta: np.ndarray, step:
         stop = int(np.argmax(acf <= 0)) if np.any(acf <= 0) else e.size
         lengths.append(1.0 + 2.0 * float(np.sum(acf[1:stop])))
         weights.append(e.size)
-    k = float(np.average(lengths, weights=weights)) if lengths else 1.0
-    try:
-        covariance = np.linalg.pinv(J.T @ J) * s2 * max(k, 1.0)
-    except np.linalg.LinAlgError:
-        return np.full(n, np.inf)
-    return np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return max(1.0, float(np.average(lengths, weights=weights))) if lengths else 1.0
+
+
+def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 3e-3) -> Profile:
+    """The replay cost along each parameter (the others held) by :data:`PROFILE_OFFSETS` both ways.
+
+    The threshold is one effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error
+    at the answer, ``k`` its :func:`correlation_length`), at least the cost of one stretch between
+    restarts. A side where the cost crosses it bounds the
+    parameter there (the crossing interpolated in the log-offset); crossed both ways, the parameter is
+    determined and its uncertainty is the larger half-width, at least the linearized covariance of the
+    determined parameters (central differences of relative ``step``, in the same batched replay).
+    """
+    n = len(theta)
+    offsets = np.array(PROFILE_OFFSETS)
+    trials = [theta]
+    for j in range(n):
+        for sign in (1.0, -1.0):
+            for o in offsets:
+                th = theta.copy()
+                th[j] = theta[j] * math.exp(sign * o)
+                trials.append(th)
+    size = step * np.abs(theta)
+    trials += list(theta + np.diag(size)) + list(theta - np.diag(size))
+    R = np.nan_to_num(replay_errors(logs, space.vectors(np.clip(np.array(trials), space.lower, space.upper)), space.names), nan=1e6)
+    costs = np.einsum("ij,ij->i", R, R)
+    r0, cost0 = R[0], float(costs[0])
+    k = correlation_length(r0, [a.measured.size for a in logs])
+    # At least one stretch between restarts' worth of cost: a replay's errors are correlated further than
+    # their autocorrelation shows (a threshold crossed or not shifts a whole stretch).
+    threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
+    status, sigma, allowed = [], np.full(n, math.inf), []
+    m = len(offsets)
+    for j in range(n):
+        reach = []
+        for side in range(2):
+            c = costs[1 + (2 * j + side) * m : 1 + (2 * j + side + 1) * m]
+            above = np.flatnonzero(c > cost0 + threshold)
+            if not above.size:
+                reach.append(math.inf)
+                continue
+            i = int(above[0])
+            lo_o, lo_c = (0.0, cost0) if i == 0 else (offsets[i - 1], max(c[i - 1], cost0))
+            reach.append(lo_o + (offsets[i] - lo_o) * (cost0 + threshold - lo_c) / max(c[i] - lo_c, 1e-300))
+        up, down = reach
+        allowed.append((theta[j] * math.exp(-down) if math.isfinite(down) else 0.0, theta[j] * math.exp(up) if math.isfinite(up) else math.inf))
+        if math.isfinite(up) and math.isfinite(down):
+            status.append(DETERMINED)
+            sigma[j] = abs(theta[j]) * (math.exp(max(up, down)) - 1)
+        else:
+            status.append(BOUNDED if math.isfinite(up) or math.isfinite(down) else NOT_IDENTIFIED)
+    determined = [j for j in range(n) if status[j] == DETERMINED]
+    if determined:
+        base = 1 + 2 * n * m
+        J = ((R[base : base + n] - R[base + n : base + 2 * n]) / (2 * size[:, None])).T[:, determined]
+        covariance = np.linalg.pinv(J.T @ J) * threshold
+        sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.diag(covariance), 0.0, None)))
+    for j in determined:  # correlated with the others so far that it is uncertain by half its value: only bounded
+        if sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]):
+            status[j], sigma[j] = BOUNDED, math.inf
+    return Profile(tuple(status), sigma, tuple(allowed), threshold, k)

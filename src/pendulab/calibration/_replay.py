@@ -21,6 +21,7 @@ import contextlib
 import hashlib
 import io
 import json
+import os
 import subprocess
 import sys
 from functools import lru_cache
@@ -33,9 +34,14 @@ from pendulab.calibration._shooting import _compile
 from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
 
-#: Reassociation and reciprocals (not ``-ffast-math``: NaN and infinity keep their meaning, a replay
-#: that diverges still says so). A third faster; the replay still equals the reference simulation to 1e-9.
-FAST_MATH = ("-fno-trapping-math", "-fassociative-math", "-fno-signed-zeros", "-freciprocal-math")
+# OpenMP threads that finish their parameter sets sleep instead of spinning (set before libgomp starts):
+# on a busy machine a spinning thread takes the core another process needs.
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+
+#: IEEE arithmetic as written, whatever the compiler or CPU: no reassociation (which would let the
+#: vectorizer reorder sums by the CPU's vector width) and no fused multiply-add. The same log then
+#: replays to the same bits on any x86-64 machine and thread count (each parameter set is one thread's).
+EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
 #: Samples per compiled call.
 CHUNK = 500
 #: Numbers of parameter sets compiled for (each a library built once per machine); others are padded.
@@ -70,12 +76,12 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
         # build has no OpenMP and warns about its evaluator, which is not used here: the warning is dropped.
         with contextlib.redirect_stderr(io.StringIO()):
             parallel = chunk.map(name, "openmp", n_sets, [1, 2, 3, 4, 6], [])
-        library, _ = _compile([parallel], name, optimize="-O2", flags=("-fopenmp", *FAST_MATH))
+        library, _ = _compile([parallel], name, optimize="-O2", flags=("-fopenmp", *EXACT_MATH))
         if library:
             return ca.external(name, library)
     f = chunk.map(name, "serial", n_sets, [1, 2, 3, 4, 6], [])
     if compile:
-        library, _ = _compile([f], name, optimize="-O2", flags=FAST_MATH)
+        library, _ = _compile([f], name, optimize="-O2", flags=EXACT_MATH)
         if library:
             return ca.external(name, library)
     return f

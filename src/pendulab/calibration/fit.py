@@ -50,8 +50,9 @@ law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel):
 ``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; while the replay
 still misses by more than two encoder steps, grids over the pairs that make slanted valleys
 (``v2`` with ``F2``, ``v1`` and ``B``) and the pattern search again. A logged voltage with sample
-noise (a measured one) is replayed through a median filter where that replays the motion better:
-noise on a level just below a threshold would otherwise break the cart away in the replay.
+noise (a measured one) is replayed denoised where that replays the motion better (split at its steps,
+then L1 trend filtering: steps, ramps and holds are kept): noise on a level just below a threshold
+would otherwise break the cart away in the replay.
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
 (each rest of the cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state
@@ -59,11 +60,15 @@ estimate); the RMS and largest position error are reported and stored in the cal
 ``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than
 :attr:`FitResult.forward_limit`.
 
-*Uncertainty.* The spread of refits on four parts of the logs (each polished from the answer; the
-whole logs' answer varies ``sqrt(4)`` times less), at least the width of the replay cost's profile
-around the answer (a threshold no push probes leaves the cost flat, and the parts then agree). Where
-the logs cannot be cut into parts, the smoothed problem's covariance ``(J^T J)^-1 sigma^2`` with the
-shooting nodes eliminated.
+*What the logs determine* (:func:`pendulab.calibration._polish.profile`). The replay cost along each
+parameter around the answer: risen by one effective chi-square unit both ways, the parameter is
+*determined* and that half-width (at least the linearized covariance, which keeps ``Beq`` and the
+force gain off together) is its standard uncertainty; one way only, it is *bounded* (e.g. every push
+exceeds ``F1``: ``F1`` only bounded above); flat, *not identified*, and it keeps its start value. The
+calibration file says which (``metadata.determination``); a log that determines nothing is refused.
+
+*The start* (:func:`ramp_start`, the one rule for the Python API and ``pendulab fit``): the friction
+from the ramp-test extraction where the logs are ramp tests, else ``params0``.
 
 Examples
 --------
@@ -163,7 +168,11 @@ class FitResult:
     travel: float = 0.0  # largest peak-to-peak cart position of the logs (m)
     uncertainty_method: str = ""
     restarts: int = 0  # where the forward simulation continued from a known state (rests; an upright pendulum's estimates)
-    voltage_filtered: bool = False  # the replays used the logged voltage through a median filter (noisy voltage)
+    voltage_filtered: bool = False  # the replays used the denoised logged voltage (noisy voltage)
+    #: Per fitted parameter: "determined", "bounded" or "not identified" by the logs (the replay cost's profile).
+    determination: dict[str, str] = field(default_factory=dict)
+    #: Per fitted parameter: the range ``(low, high)`` over which the replay stays as good (0 or inf: no limit).
+    allowed: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def forward_limit(self) -> float:
@@ -176,15 +185,27 @@ class FitResult:
         return bool(math.isfinite(self.forward_rms) and self.forward_rms <= self.forward_limit)
 
     def to_calibration(self, **metadata: Any) -> Calibration:
-        """A calibration file's content: the full friction vector (fitted or kept) and the fitted extras."""
+        """A calibration file's content: the full friction vector (fitted or kept) and the fitted extras.
+
+        ``metadata["determination"]`` says for each fitted parameter whether the logs determined it,
+        bounded it (``allowed_range``; no uncertainty) or did not identify it (it then holds its start
+        value, listed in ``kept_start_value``).
+        """
+
+        def finite(v: float) -> float | None:  # JSON has no infinity
+            return float(v) if math.isfinite(v) else None
+
         p = self.params
         record = {
+            "determination": dict(self.determination),
+            "allowed_range": {n: [finite(a), finite(b)] for n, (a, b) in self.allowed.items()},
+            "kept_start_value": [n for n, s in self.determination.items() if s == "not identified"],
             "method": "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law",
             "uncertainty_method": self.uncertainty_method,
             "forward_simulation_restarts": self.restarts,
-            "forward_simulation_voltage": "median-filtered (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
+            "forward_simulation_voltage": "denoised (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
             "fitted": list(self.names),
-            "uncertainty": self.uncertainty,
+            "uncertainty": {n: finite(u) for n, u in self.uncertainty.items()},
             "initial": self.initial,
             "residual_rms_m": self.residual_rms,
             "forward_simulation_rms_m": self.forward_rms,
@@ -199,11 +220,17 @@ class FitResult:
         return Calibration(friction=p.friction, metadata=record, **extras)
 
     def summary(self) -> str:
-        from pendulab.calibration._polish import VOLTAGE_MEDIAN
-
-        lines = [f"{'name':<11}{'start':>11}{'fitted':>11}{'± (1 sigma)':>13}"]
+        lines = [f"{'name':<11}{'start':>11}{'fitted':>11}  {'± (1 sigma) or range':<22}the logs"]
         for name in self.names:
-            lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}{self.uncertainty[name]:>13.2g}")
+            status = self.determination.get(name, "determined")
+            low, high = self.allowed.get(name, (0.0, math.inf))
+            if status == "determined":
+                spread = f"± {self.uncertainty[name]:.2g}"
+            elif status == "bounded":
+                spread = f">= {low:.4g}" if high == math.inf else f"<= {high:.4g}"
+            else:
+                spread = "(start value kept)"
+            lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
             f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
             f"{self.iterations} IPOPT iterations, {self.seconds:.2f} s ({self.status})"
@@ -212,7 +239,7 @@ class FitResult:
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
             f"max {self.forward_max * 1e6:.1f} um (encoder step {self.encoder_step * 1e6:.1f} um, accepted up to "
             f"{self.forward_limit * 1e6:.0f} um RMS)"
-            + (f"; the logged voltage is noisy and was replayed through a {VOLTAGE_MEDIAN}-sample median filter" if self.voltage_filtered else "")
+            + ("; the logged voltage is noisy and was replayed denoised (L1 trend filter, split at its steps)" if self.voltage_filtered else "")
         )
         return "\n".join(lines)
 
@@ -316,10 +343,8 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
 #: Above this replay RMS (encoder steps) the polish also grids the pairs that make slanted valleys.
 REFINE_ABOVE_STEPS = 2.0
 REFINE_ROUNDS = 2
-#: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s
-#: of log. Then the pattern-search steps of each refit on a part.
+#: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
 POLISH_WORK = 1.4e7
-PART_STEPS = 4
 #: The smoothed fit sees at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
 STAGE_SECONDS = 20.0
 PIECE_SECONDS = 4.0
@@ -368,6 +393,13 @@ def _start_from_logs(logs: Sequence[RampLog], params0: PlantParameters, names: S
     return estimate
 
 
+#: What to record instead of a log that determines nothing.
+RECORD_INSTEAD = (
+    "slow voltage ramps in both directions with rests between (the breakaway, F1: 'pendulab calibrate --log'), "
+    "fast steps (the drive and Beq) or a sine sweep (the slip region, B)"
+)
+
+
 def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: Callable[[RampLog], int]) -> None:
     if not logs:
         raise CalibrationError("no log to fit; give at least one log file")
@@ -380,13 +412,13 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
                 "and should contain the cart breaking away and moving"
             )
         if np.ptp(log.x) < 1e-4:
-            raise CalibrationError(
-                f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um); a fit needs a log where it breaks away and moves"
+            raise FitRejected(
+                f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um), so the log determines nothing; record {RECORD_INSTEAD}"
             )
         if np.ptp(log.V) <= 1e-3 * max(1.0, float(np.max(np.abs(log.V)))):
             raise FitRejected(
                 f"{where}: the voltage is constant ({float(np.mean(log.V)):.3g} V), so the force gain, Beq and the friction "
-                "cannot be told apart (a steady speed fits any of them); log ramps, steps or a sweep of the voltage"
+                f"cannot be told apart (a steady speed fits any of them); record {RECORD_INSTEAD}"
             )
         if with_pendulum and log.alpha is None:
             raise CalibrationError(f"{where} has no alpha column; fitting with a pendulum needs the logged angle (or use --pendulum none)")
@@ -416,7 +448,7 @@ def fit_parameters(
     tolerance: float = 1e-6,
     compile: bool | None = None,
     polish_iter: int = 12,
-    uncertainty_parts: bool = True,
+    start: str = "auto",
     polish_work: float = POLISH_WORK,
     start_from_logs: bool = True,
     on_progress: Callable[[str], None] | None = None,
@@ -450,8 +482,10 @@ def fit_parameters(
         Compile the interval functions to C (cached per machine); default: when a compiler exists.
     polish_iter : int
         Largest number of pattern-search steps of the polish on the true law's replay.
-    uncertainty_parts : bool
-        Uncertainties from refits on parts of the logs (else from the smoothed problem's covariance).
+    start : {"auto", "given"}
+        ``"auto"``: the friction starts from the ramp-test extraction where the logs are ramp tests
+        (:func:`ramp_start`; the one place that decides the start, for the Python API and
+        ``pendulab fit`` alike); ``"given"``: from ``params0``.
     polish_work : float
         Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
         same answer on a busy machine.
@@ -500,9 +534,14 @@ def fit_parameters(
         return max(1, int(round(interval / log.period)))
 
     _check_logs(logs, with_pendulum, samples_per_interval)
-    start = np.array([getattr(params0, n) for n in names])
-    scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start)])
-    theta0 = start / scales
+    if start not in ("auto", "given"):
+        raise CalibrationError(f"start={start!r}: choose 'auto' (from the logs where they are ramp tests) or 'given'")
+    if start == "auto":
+        params0, note = ramp_start(logs, params0)
+        progress(note)
+    start_values = np.array([getattr(params0, n) for n in names])
+    scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start_values)])
+    theta0 = start_values / scales
     defect_sigma = np.asarray(process_noise, dtype=float)[:ns]
 
     # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
@@ -699,23 +738,29 @@ def fit_parameters(
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)
 
-    # Uncertainty: refits on parts of the logs (a few pattern-search steps each, no scans), at least the
-    # width of the cost's profile; the smoothed problem's covariance where the logs cannot be cut.
-    spread = _polish.part_spread(searched, space, theta_opt, max_iter=PART_STEPS) if uncertainty_parts else None
-    if spread is not None:
-        # A flat stretch of the replay's cost (a threshold no push of the logs probes) hides from the
-        # parts' spread; the profile of the cost around the answer shows it.
-        width = _polish.profile_width(searched, space, theta_opt)
-        # Parameters off together (Beq and the force gain) hide from both; the linearization with the
-        # errors' correlation keeps them.
-        linear = _polish.linearized_sigma(searched, space, theta_opt)
-        uncertainty = np.maximum.reduce([spread[0], width, linear])
-        uncertainty_method = (
-            f"the largest of: the spread of refits on {spread[1].shape[0]} parts of the logs, the width of the replay's cost profile, "
-            "and the replay's linearized covariance (with the errors' correlation length)"
+    # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
+    # they do not identify keeps its start value (if the replay stays as good with it).
+    prof = _polish.profile(searched, space, theta_opt)
+    kept = [j for j, s_ in enumerate(prof.status) if s_ == _polish.NOT_IDENTIFIED]
+    if kept:
+        trial = theta_opt.copy()
+        trial[kept] = theta0[kept]
+        trial = space.project(trial)
+        r_trial = space.residuals(searched, trial[None])[0]
+        if float(r_trial @ r_trial) <= polished.cost + prof.threshold:
+            theta_opt = trial
+            values = {n: float(v * s_) for n, v, s_ in zip(names, theta_opt, scales)}
+            params = params0.with_values(**values)
+    if _polish.DETERMINED not in prof.status:
+        raise FitRejected(
+            "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
+            f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
         )
-    else:
-        uncertainty, uncertainty_method = _uncertainty(best["problem"], r_opt, J_opt), "least-squares covariance of the smoothed problem"
+    uncertainty = prof.sigma
+    uncertainty_method = (
+        "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
+        f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance of the determined ones"
+    )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
     curves, forward_errors = [], []
@@ -733,9 +778,11 @@ def fit_parameters(
     return FitResult(
         names=names,
         values=values,
-        initial={n: float(v) for n, v in zip(names, start)},
+        initial={n: float(v) for n, v in zip(names, start_values)},
         uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
         uncertainty_method=uncertainty_method,
+        determination=dict(zip(names, prof.status)),
+        allowed={n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)},
         restarts=sum(len(a.restarts) for a in replays),
         voltage_filtered=any(a.denoised for a in replays),
         residual_rms=rms,
@@ -790,31 +837,6 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
     merged["v1"] = min(merged["v1"], merged["v2"])
     text = ", ".join(f"{n}={merged[n]:.4g}" for n in FRICTION_NAMES)
     return params0.with_values(**merged), f"starting from the ramp-test extraction: {text}"
-
-
-def _uncertainty(problem, r: np.ndarray, J: ca.DM) -> np.ndarray:
-    """Standard uncertainty of the scaled parameters: ``sqrt(diag((J^T J)^-1)) * sigma``.
-
-    ``J`` holds every residual (samples, continuity defects, prior) against every unknown (the
-    parameters and the shooting nodes); the parameters' block of ``(J^T J)^-1`` is their
-    covariance with the nodes eliminated. ``sigma^2 = r^T r / (N - n)`` rescales the assumed noise.
-    """
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
-
-    sparsity = J.sparsity()
-    Js = sp.csc_matrix((np.asarray(J.nonzeros()), sparsity.row(), sparsity.colind()), shape=J.shape)
-    JTJ = (Js.T @ Js).tocsc()
-    nt = problem.nt
-    rhs = np.zeros((problem.n_w, nt))
-    rhs[np.arange(nt), np.arange(nt)] = 1.0
-    dof = max(len(r) - problem.n_w, 1)
-    sigma2 = float(r @ r) / dof
-    try:
-        solved = spla.splu(JTJ).solve(rhs)
-    except RuntimeError:  # singular: a parameter the logs cannot show, and no prior
-        return np.full(nt, np.inf)
-    return np.sqrt(np.clip(np.diag(solved[:nt, :nt]) * sigma2, 0, None))
 
 
 def plot_fit(result: FitResult, path: str | Path) -> Path:

@@ -1,24 +1,155 @@
-"""Synthetic ramp-test logs with known parameters, encoder quantization and noise (tests, benchmarks).
+"""Synthetic logs with known parameters: the fit's test corpus (used by ``tests/`` and ``bench/``).
+
+Each log is the CasADi plant under the *true* switching stick-slip law driven by a voltage profile,
+then position noise and the encoder's quantization, as a rig would log it; optionally noise on the
+logged voltage (a measured, not a commanded, voltage). The corpus (:func:`corpus`) crosses
+:data:`SHAPES` with :data:`RIGS` and two voltage-noise levels, and holds a seeded third of the cases
+out (:func:`held_out`): those are looked at only at the end and reported apart.
 
 Examples
 --------
->>> from pendulab.model.parameters import PlantParameters
->>> log = synthetic_ramp_log(PlantParameters.preset("none", Beq=5.0), iterations=1, seed=1)
->>> log.duration > 10
-True
+>>> log = synthetic_log("triangle", RIGS["sticky"], duration=4.0, voltage_noise=0.0)
+>>> round(log.duration, 1), bool(abs(log.x[0]) < 1e-4)
+(4.0, True)
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from pendulab.calibration._simulation import simulate
 from pendulab.calibration.logs import RampLog
-from pendulab.calibration.ramp import run_ramp_test
-from pendulab.calibration.rig import VirtualRig
 from pendulab.model.parameters import PlantParameters
 
+#: Sample period of the synthetic logs (s).
+STEP = 1e-3
+#: Rigs spread over a wide box around the lab's defaults (Beq 4.3, force gain 1, F1 1.5 N, B 20).
+RIGS = {
+    "unseen": PlantParameters.preset("none", Beq=6.1, force_gain=0.82, F1=2.3, v1=0.003, F2=3.9, v2=0.06, B=60.0),
+    "heavy drag, weak drive": PlantParameters.preset("none", Beq=12.0, force_gain=0.6, F1=1.0, v1=0.004, F2=2.0, v2=0.08, B=40.0),
+    "light drag, strong drive": PlantParameters.preset("none", Beq=3.0, force_gain=1.2, F1=0.8, v1=0.006, F2=1.6, v2=0.04, B=15.0),
+    "sticky": PlantParameters.preset("none", Beq=8.0, force_gain=0.9, F1=3.0, v1=0.002, F2=5.0, v2=0.03, B=100.0),
+}
+TRUE = RIGS["unseen"]
 #: A plausible rig unlike the lab's defaults (the cart alone): what tests and benchmarks extract or fit back.
 TEST_RIG = PlantParameters.preset("none", Beq=5.2, force_gain=0.9, F1=2.0, v1=0.004, F2=3.6, v2=0.06, B=25.0)
+#: Shapes of the corpus (:func:`corpus_log`).
+SHAPES = ("ramps with holds", "triangle", "random steps", "chirp", "closed loop", "calibrate ramp")
+#: Voltage noise levels of the corpus (V).
+VOLTAGE_NOISE = (0.0, 0.01)
+
+
+def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
+    """Voltage samples (one per :data:`STEP`) of an open-loop shape.
+
+    ``"ramps with holds"``: slow ramps out to 1.2-3 V, held 0.6 s, ramped down, rested, both directions;
+    ``"ramps with rests"``: ramps to 2.5-4 V dropped to 0 at the peak; ``"triangle"``: a 0.4 Hz triangle wave of 3 V; ``"random steps"``: steps of random size and sign,
+    some below the breakaway; ``"chirp"``: a sine sweep from 0.3 to 3 Hz with a slow offset.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(round(duration / STEP))) * STEP
+    if shape == "ramps with holds":
+        V = np.zeros_like(t)
+        start, sign = 0.3, 1.0
+        while start < duration - 1.0:
+            rise, peak, hold = rng.uniform(0.8, 1.6), rng.uniform(1.2, 3.0), 0.6
+            up = (t >= start) & (t < start + rise)
+            V[up] = sign * peak * (t[up] - start) / rise
+            held = (t >= start + rise) & (t < start + rise + hold)
+            V[held] = sign * peak
+            down = (t >= start + rise + hold) & (t < start + 2 * rise + hold)
+            V[down] = sign * peak * (1 - (t[down] - start - rise - hold) / rise)
+            start += 2 * rise + hold + rng.uniform(0.4, 0.8)
+            sign = -sign
+        return V
+    if shape == "ramps with rests":  # faster ramps to 2.5-4 V, dropped to 0 at the peak, rests between
+        V = np.zeros_like(t)
+        start, sign = 0.5, 1.0
+        while start < duration - 2.0:
+            rise, peak = rng.uniform(0.8, 1.6), rng.uniform(2.5, 4.0)
+            up = (t >= start) & (t < start + rise)
+            V[up] = sign * peak * (t[up] - start) / rise
+            start += rise + rng.uniform(0.6, 1.2)
+            sign = -sign
+        return V
+    if shape == "triangle":
+        phase = (0.4 * t) % 1.0
+        return 3.0 * (4 * np.abs(phase - 0.5) - 1)
+    if shape == "random steps":
+        edges = np.cumsum(rng.uniform(0.25, 0.6, size=int(duration / 0.25) + 2))
+        levels = rng.choice([-1.0, 1.0], size=edges.size) * rng.uniform(0.5, 3.5, size=edges.size)
+        levels[::3] = 0.0
+        return levels[np.clip(np.searchsorted(edges, t), 0, levels.size - 1)]
+    if shape == "chirp":
+        f = 0.3 + (3.0 - 0.3) * t / duration
+        return 3.0 * np.sin(2 * np.pi * np.cumsum(f) * STEP) + 0.4 * np.sin(2 * np.pi * 0.1 * t)
+    raise ValueError(f"unknown open-loop shape {shape!r}; choose among ramps with holds, ramps with rests, triangle, random steps, chirp")
+
+
+def _measured(t: np.ndarray, V: np.ndarray, x: np.ndarray, q: float, noise: float, voltage_noise: float, seed: int,
+              source: str, alpha: np.ndarray | None = None) -> RampLog:
+    """The log as a rig writes it: position noise then the encoder's quantization, voltage noise (``seed``'s draws)."""
+    rng = np.random.default_rng(seed)
+    x = x + rng.normal(0.0, noise, x.size) if noise > 0 else x.copy()
+    x = q * np.round(x / q) if q > 0 else x
+    V = V + rng.normal(0.0, voltage_noise, V.size) if voltage_noise > 0 else V.copy()
+    return RampLog(t, V, x, alpha=alpha, source=source)
+
+
+def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 20.0, *, noise: float = 1e-5,
+                  voltage_noise: float = 0.01, seed: int = 0, cart_hold: float = 0.35) -> RampLog:
+    """A log of an open-loop ``shape`` (:func:`voltage_profile`) on the rig ``params``.
+
+    A slow outer loop keeps the cart on its track: the profile is added to a weak position feedback
+    (blocks of 0.1 s, as a TA would).
+    """
+    V_plan = voltage_profile(shape, duration, seed)
+    n = V_plan.size
+    states = np.zeros((n + 1, 4))
+    V = np.empty(n)
+    block = 100
+    for i in range(0, n, block):
+        x = states[i, 0]
+        V[i : i + block] = np.clip(V_plan[i : i + block] - 20.0 * x * (abs(x) > cart_hold * 0.5), -params.V_max, params.V_max)
+        part = simulate(params, V[i : i + block], STEP, states[i], t0=i * STEP)
+        states[i : i + part.shape[0]] = part
+    t = np.arange(n + 1) * STEP
+    return _measured(t, np.append(V, 0.0), states[:, 0], params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")
+
+
+def closed_loop_params(rig: PlantParameters = TRUE) -> PlantParameters:
+    """The long pendulum on ``rig``'s cart friction, poked at 1 s."""
+    friction = {n: getattr(rig, n) for n in ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")}
+    return PlantParameters.preset("long", poke_magnitude=150.0, poke_duration=0.005, poke_start=1.0, **friction)
+
+
+def closed_loop_log(rig: PlantParameters = TRUE, duration: float = 8.0, *, noise: float = 1e-5, voltage_noise: float = 0.0,
+                    seed: int = 0) -> RampLog:
+    """A closed-loop run with the long pendulum up: the demo controller through the FMUs, poked at 1 s.
+
+    The angle and position are quantized as the encoders give them; the voltage is the applied one.
+    """
+    from pendulab.control.controller import demo_controller
+    from pendulab.cosim.pendulum import simulate_poke
+
+    params = closed_loop_params(rig)
+    c = simulate_poke(demo_controller("long"), params, stop_time=duration).columns
+    log = _measured(c["t"], c["voltage"], c["x"], params.q_x, noise, voltage_noise, seed, "synthetic closed loop, long pendulum",
+                    alpha=c["alpha_measured"])
+    return log
+
+
+def calibrate_ramp_log(rig: PlantParameters = TRUE, *, iterations: int = 1, noise: float = 1e-5, voltage_noise: float = 0.0,
+                       seed: int = 0, x0: float = 0.05) -> RampLog:
+    """The ``pendulab calibrate`` ramp test, run by the same program on the virtual rig with ``rig``."""
+    from pendulab.calibration.ramp import run_ramp_test
+    from pendulab.calibration.rig import VirtualRig
+
+    with VirtualRig(rig, x0=x0) as virtual:
+        log = run_ramp_test(virtual, iterations=iterations)
+    return _measured(log.t, log.V, log.x, rig.q_x, noise, voltage_noise, seed, "synthetic calibrate ramp test")
 
 
 def synthetic_ramp_log(
@@ -55,3 +186,40 @@ def synthetic_ramp_log(
     if q > 0:
         noisy = q * np.round(noisy / q)
     return RampLog(log.t, log.V, noisy, source=f"synthetic ({log.source}, noise {noise:g} m)", events=log.events)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One corpus case: a shape on a rig, with or without voltage noise."""
+
+    shape: str
+    rig: str
+    voltage_noise: float
+    duration: float = 16.0
+
+    @property
+    def name(self) -> str:
+        return f"{self.shape} | {self.rig} | {self.voltage_noise * 1e3:.0f} mV"
+
+    @property
+    def params(self) -> PlantParameters:
+        """The true parameters of the log (the long pendulum on the rig's cart for the closed loop)."""
+        return closed_loop_params(RIGS[self.rig]) if self.shape == "closed loop" else RIGS[self.rig]
+
+    def log(self) -> RampLog:
+        if self.shape == "closed loop":
+            return closed_loop_log(RIGS[self.rig], duration=min(self.duration, 8.0), voltage_noise=self.voltage_noise)
+        if self.shape == "calibrate ramp":
+            return calibrate_ramp_log(RIGS[self.rig], voltage_noise=self.voltage_noise)
+        return synthetic_log(self.shape, RIGS[self.rig], duration=self.duration, voltage_noise=self.voltage_noise)
+
+
+def corpus() -> list[Case]:
+    """Every case: :data:`SHAPES` x :data:`RIGS` x :data:`VOLTAGE_NOISE`."""
+    return [Case(s, r, v) for s in SHAPES for r in RIGS for v in VOLTAGE_NOISE]
+
+
+def held_out(cases: list[Case], seed: int = 19) -> set[str]:
+    """Names of a seeded third of ``cases``: looked at only at the end, reported apart."""
+    rng = np.random.default_rng(seed)
+    return {cases[i].name for i in rng.choice(len(cases), len(cases) // 3, replace=False)}

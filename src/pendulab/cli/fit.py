@@ -35,8 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--fit-mass", action="store_true", help="also fit M_cart")
     parser.add_argument(
         "--start", choices=("auto", "defaults"), default="auto",
-        help="auto: start the friction from the ramp-test extraction where the logs are ramp tests (robust); "
-        "defaults: from the lab defaults or --calibration",
+        help="auto: start the friction from the ramp-test extraction where the logs are ramp tests (as the Python API's "
+        "fit_parameters does by default); defaults: from the lab defaults or --calibration",
     )
     parser.add_argument("--scale-for", choices=("long", "short"), metavar="PENDULUM",
                         help="scale the fitted F1, F2 by the mass ratio for this pendulum (logs taken without it)")
@@ -50,7 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pendulab.calibration.extract import mass_ratio
     from pendulab.calibration.files import load_calibration, save_calibration
-    from pendulab.calibration.fit import FITTABLE, fit_parameters, plot_fit, ramp_start
+    from pendulab.calibration.fit import FITTABLE, fit_parameters, plot_fit
     from pendulab.calibration.logs import read_log
 
     names = [n.strip() for n in args.fit.split(",") if n.strip()]
@@ -66,11 +66,9 @@ def run(args: argparse.Namespace) -> int:
     if args.calibration:
         params0 = load_calibration(args.calibration).apply(params0)
     logs = [read_log(path) for path in args.logs]
-    if args.start == "auto":
-        params0, note = ramp_start(logs, params0)
-        print(note, flush=True)
     result = fit_parameters(
-        logs, params0, fit=names, fit_mass=args.fit_mass, interval=args.interval, on_progress=lambda text: print(text, flush=True)
+        logs, params0, fit=names, fit_mass=args.fit_mass, interval=args.interval, start="auto" if args.start == "auto" else "given",
+        on_progress=lambda text: print(text, flush=True),
     )
     print(result.summary())
     if not result.success and result.forward_ok:

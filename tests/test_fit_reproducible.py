@@ -1,0 +1,38 @@
+"""The fit's replay gives the same bits on any thread count (issue 19: the same answer on any x86-64 machine).
+
+Each parameter set is replayed by one thread from start to end, in IEEE arithmetic as written (no
+reassociation, no fused multiply-add: :data:`pendulab.calibration._replay.EXACT_MATH`), so neither the
+OpenMP schedule nor the CPU's vector width can change a result.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from pendulab.calibration._replay import EXACT_MATH
+
+SCRIPT = """
+import hashlib, numpy as np
+from pendulab.calibration._replay import replay
+from pendulab.calibration.synthetic import RIGS, synthetic_log
+log = synthetic_log("random steps", RIGS["sticky"], duration=3.0, voltage_noise=0.0)
+rng = np.random.default_rng(5)
+base = np.asarray(RIGS["sticky"].as_vector(), dtype=float)
+sets = base * np.exp(rng.normal(0.0, 0.2, (32, base.size)))
+states = replay(sets, log.V[:-1], log.t[:-1], np.zeros(4), free=("F1", "v1", "F2", "v2", "B", "Beq", "force_gain"))
+assert np.all(np.isfinite(states)) and np.ptp(states[:, -1, 0]) > 1e-3  # the sets differ
+print(hashlib.sha256(states.tobytes()).hexdigest())
+"""
+
+
+def run(threads: int) -> str:
+    env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
+    return subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, check=True, timeout=600).stdout.strip()
+
+
+def test_a_batched_replay_is_bitwise_the_same_on_one_and_two_threads():
+    assert "-ffp-contract=off" in EXACT_MATH and not any("fast-math" in f and "no" not in f for f in EXACT_MATH)
+    one, two = run(1), run(2)
+    assert len(one) == 64 and one == two
