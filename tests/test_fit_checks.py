@@ -3,7 +3,6 @@ answer is not a calibration (not identifiable, or a replay far from the log), ol
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np

@@ -732,7 +732,7 @@ def fit_parameters(
         other = polished_fit(solve())
         if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
             best = other
-    stats, r_opt, J_opt, rms = best["stats"], best["r"], best["J"], best["rms"]
+    stats, rms = best["stats"], best["rms"]
     whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
     theta_opt = polished.theta
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}

@@ -169,6 +169,9 @@ def synthetic_ramp_log(
     with vibration would read it. ``duration`` repeats iterations until the log is at least that
     long and cuts it there.
     """
+    from pendulab.calibration.ramp import run_ramp_test
+    from pendulab.calibration.rig import VirtualRig
+
     rng = np.random.default_rng(seed)
     with VirtualRig(params, x0=x0, backend=backend) as rig:
         if duration is None:
