@@ -38,9 +38,9 @@ CORPUS = {
         parse_controller("-5", "7", "400000", ["-17;-80", ";-80"]), "short", 50, 0, "balanced", {"saturation", "chattering"},
         ("limit_cycle_amplitude_rad",)),
     # Its angle swings back further than its first peak (the pendulum leans as the cart runs): no
-    # second-order metrics, with the reason.
+    # overshoot (with the reason); the first peak's time and the swings' frequency are read.
     "demo, 220 poke, delay 2 (drifts slowly)": (demo_controller("long"), "long", 220, 2, "balanced", {"drift", "small margin"},
-                                                ("limit_cycle_amplitude_rad",)),
+                                                ("natural_frequency_rad_s", "peak_time_s", "limit_cycle_amplitude_rad")),
     "demo at 0.62x gain (friction/quantization limit cycle)": (
         parse_controller("-5", "7", "25000", ["-17;-80", ";-80"]), "long", 50, 0, "balanced", set(), ("limit_cycle_amplitude_rad", "peak_time_s")),
     "PID 40,5,4 (falls)": (Controller.pid(40, 5, 4), "long", 220, 0, "fell", set(), ()),
