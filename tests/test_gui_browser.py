@@ -231,7 +231,8 @@ def _old_lab_folder(folder: Path) -> Path:
     folder.mkdir()
     t = np.arange(0, 3.0, 1e-3)
     after = np.clip(t - 1.0, 0, None)
-    alpha = np.where(t > 1.0, 0.05 * np.exp(-3 * after) * np.sin(8 * after), 0.0)
+    # 0.8 rad/s at the onset: a poke of 160 rad/s^2 for 5 ms, above the poke detector's 3 encoder steps per 10 ms.
+    alpha = np.where(t > 1.0, 0.1 * np.exp(-3 * after) * np.sin(8 * after), 0.0)
     for name, values in (("angle", alpha), ("position", 0.1 * alpha), ("voltage", 5 * alpha)):
         scipy.io.savemat(folder / f"{name}.mat", {f"{name}Data": np.column_stack([t, values])})
     return folder
