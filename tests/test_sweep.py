@@ -74,8 +74,8 @@ def test_a_reset_instance_runs_as_a_fresh_one(loop_fmus):
     import numpy as np
 
     import pendulab
-    from pendulab.simulation import Simulator
     from pendulab.analysis.metrics import METRIC_KEYS
+    from pendulab.simulation import Simulator
     from pendulab.sweep.runner import BatchRunner
 
     spec = parse_sweep_spec(SPEC)
