@@ -132,10 +132,11 @@ def closed_loop_log(rig: PlantParameters = TRUE, duration: float = 8.0, *, noise
     The angle and position are quantized as the encoders give them; the voltage is the applied one.
     """
     from pendulab.control.controller import demo_controller
-    from pendulab.cosim.pendulum import simulate_poke
+    from pendulab.simulation import simulate
+    from pendulab.spec import RunSpec, Timing
 
     params = closed_loop_params(rig)
-    c = simulate_poke(demo_controller("long"), params, stop_time=duration).columns
+    c = simulate(RunSpec.for_parameters(demo_controller("long"), params, timing=Timing(stop_time=duration))).columns
     log = _measured(c["t"], c["voltage"], c["x"], params.q_x, noise, voltage_noise, seed, "synthetic closed loop, long pendulum",
                     alpha=c["alpha_measured"])
     return log
