@@ -192,14 +192,10 @@ def run(args: argparse.Namespace) -> int:
 
         written.append(animate_run(result.columns, out_dir / "rig.gif", Lp=params.Lp, poke_start=params.poke_start) or out_dir / "rig.gif")
     if args.ssp and seesaw:
-        from pendulab.control.state_feedback import realize_state_feedback
-        from pendulab.cosim.seesaw import seesaw_system
         from pendulab.cosim.ssp import export_ssp
+        from pendulab.simulation import build_system
 
-        timing = spec.timing
-        block = realize_state_feedback(spec.controller.state_feedback, timing.step, timing.method)
-        system = seesaw_system(params, block.to_parameters(), step=timing.step, supervisor=spec.supervisor_parameters(), delay=timing.delay)
-        written.append(export_ssp(system, out_dir / "loop.ssp", stop_time=timing.stop_time))
+        written.append(export_ssp(build_system(spec, params), out_dir / "loop.ssp", stop_time=spec.timing.stop_time))
     elif args.ssp:
         from pendulab.control.realization import discretize
         from pendulab.cosim.pendulum import pendulum_system

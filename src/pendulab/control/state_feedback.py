@@ -20,6 +20,7 @@ True
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
@@ -189,7 +190,7 @@ def save_state_feedback_file(design: StateFeedbackDesign, path: str) -> None:
 
     def value(v: object) -> str:
         if isinstance(v, str):
-            return json_string(v)
+            return json.dumps(v)  # a TOML basic string is a JSON string
         if isinstance(v, (list, tuple)):
             return "[" + ", ".join(value(x) for x in v) + "]"
         return repr(float(v))  # type: ignore[arg-type]
@@ -202,12 +203,6 @@ def save_state_feedback_file(design: StateFeedbackDesign, path: str) -> None:
         atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
     except OSError as exc:
         raise UserError(f"cannot write controller file {path}: {exc.strerror or exc}; check the folder") from None
-
-
-def json_string(text: str) -> str:
-    import json
-
-    return json.dumps(text)
 
 
 def load_state_feedback_file(path: str) -> StateFeedbackDesign:
