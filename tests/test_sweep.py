@@ -94,6 +94,48 @@ def test_a_reset_instance_runs_as_a_fresh_one(loop_fmus):
     assert row["status"] == fresh.metrics["verdict"]["outcome"]
 
 
+#: A controller at an edge (the demo's kernel gain 80 000, 1.5 s runs): cut at the track limit as it stands, and
+#: balanced once any one of these [run] keys changes. Each case: the key's TOML, and the RunSpec section it means.
+EDGE_RUN = {"stop_time": "1.5", "poke": "[220, 0.005, 0.5]"}
+EDGE_CASES = [
+    ("delay", "4", {"timing": ("Timing", {"stop_time": 1.5, "delay": 4})}),
+    ("pendulum", '"short"', {"plant": ("Plant", {"pendulum": "short"})}),
+    ("cart", '"ip02-weight"', {"plant": ("Plant", {"cart": "ip02-weight"})}),
+    ("poke", "[100, 0.005, 0.5]", {"poke": ("Poke", {"magnitude": 100.0, "duration": 0.005, "start": 0.5})}),
+    ("supervisor", "{ x_max = 0.5 }", {"supervisor": ("Supervisor", {"x_max": 0.5})}),
+]
+
+
+def test_every_run_key_reaches_the_runs_as_simulate_sees_it(loop_fmus):
+    """A sweep's row is what pendulab.simulate gives the same run (spec written out by hand), for [run] keys
+    that change the outcome; the rows come from one set of reset FMU instances, in turn."""
+    import pendulab
+    from pendulab.analysis.metrics import METRIC_KEYS
+    from pendulab.control import Controller, demo_controller
+    from pendulab.sweep.runner import BatchRunner
+
+    tables = demo_controller().to_dict()
+    tables["kernel"]["gain"] = 80000.0
+    controller = Controller.from_dict(tables)
+    base = {"poke": pendulab.Poke(220.0, 0.005, 0.5), "timing": pendulab.Timing(stop_time=1.5)}
+    with BatchRunner() as runner:
+        def row_of(run: dict[str, str]) -> dict:
+            text = "[run]\n" + "".join(f"{k} = {v}\n" for k, v in run.items()) + "[controller]\ndemo = true\n[grid]\n\"kernel.gain\" = [80000]\n"
+            spec = parse_sweep_spec(text)
+            return runner.run(spec, *next(runs_of(spec)))
+
+        nominal = pendulab.simulate(pendulab.RunSpec(controller, **base)).metrics
+        assert nominal["verdict"]["outcome"] == "cut" and nominal["safety_cut_reason"] == "track limit"
+        assert row_of(EDGE_RUN)["status"] == "cut"
+        for key, value, sections in EDGE_CASES:
+            spec = pendulab.RunSpec(controller, **{**base, **{name: getattr(pendulab, kind)(**fields) for name, (kind, fields) in sections.items()}})
+            expected = pendulab.simulate(spec).metrics
+            row = row_of({**EDGE_RUN, key: value})
+            assert expected["verdict"]["outcome"] == "balanced", key  # the key changes the outcome ...
+            assert row["status"] == "balanced", key  # ... in the sweep too, with the same numbers
+            assert {k: row[k] for k in METRIC_KEYS} == {k: expected[k] for k in METRIC_KEYS}, key
+
+
 def test_one_worker_two_workers_and_a_dask_local_cluster_give_one_table(spec_file, reference, tmp_path):
     table, result = reference
     statuses = table.column("status").to_pylist()
