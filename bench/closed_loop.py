@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 
 from pendulab.control.controller import demo_controller  # noqa: E402
 from pendulab.control.realization import discretize  # noqa: E402
-from pendulab.cosim.master import Master, _native_runner  # noqa: E402
+from pendulab.cosim.master import Master, native_runner  # noqa: E402
 from pendulab.cosim.pendulum import RECORDED, pendulum_system  # noqa: E402
 from pendulab.cosim.ssp import PARAMETER_SET, export_ssp  # noqa: E402
 from pendulab.fmu.models.supervisor.config import ALPHA_MAX_DEFAULT, RUNNING, TRIPPED, X_MAX_DEFAULT  # noqa: E402
@@ -159,7 +159,7 @@ def main() -> int:
     lti = discretize(demo_controller(), h=H)
     system = pendulum_system(params, lti.to_parameters(), step=H)
     record = list(RECORDED)
-    if _native_runner() is None:
+    if native_runner() is None:
         print("warning: no C compiler: the 'native' variant falls back to the Python loop")
 
     with tempfile.TemporaryDirectory(prefix="pendulab-bench-") as tmp:

@@ -41,7 +41,7 @@ def main() -> int:
 
     import numpy as np
 
-    from pendulab.calibration._replay import replay
+    from pendulab.calibration._replay import replay  # private: times the fit's own compiled replay, the unit of the fit's cost
     from pendulab.calibration.fit import fit_parameters
     from pendulab.calibration.synthetic import RIGS, synthetic_log
     from pendulab.model.parameters import PlantParameters

@@ -35,9 +35,9 @@ def true_replay_steps(log, true) -> float:
     """RMS replay error of the true values, restarted at rests, in encoder steps (the fit's own objective)."""
     import numpy as np
 
-    from pendulab.calibration import _polish
-    from pendulab.calibration._replay import replay
-    from pendulab.calibration.fit import _initial_states, _noise_level
+    from pendulab.calibration import _polish  # private: the fit's own objective (anchors, denoising) for the true values
+    from pendulab.calibration._replay import replay  # private: the fit's own objective (compiled replay)
+    from pendulab.calibration.fit import _initial_states, _noise_level  # private: the fit's own start states and noise level
 
     with_pendulum = true.Mp > 0
     used = ((len(log) - 1) // 10) * 10 + 1

@@ -55,16 +55,16 @@ def per_row_csv(names: list[str], data: np.ndarray) -> bytes:
 
 def baseline_run(controller: object, stop_time: float, out: Path) -> float:
     """Wall time of the run and its files written one after the other, run.csv by :func:`per_row_csv`."""
-    from pendulab.analysis.results import _column_table, _matlab_meta, json_safe
+    from pendulab.analysis.results import column_table, json_safe, matlab_meta
     from pendulab.simulation import simulate
     from pendulab.spec import RunSpec, Timing
 
     t0 = time.perf_counter()
     result = simulate(RunSpec(controller, timing=Timing(stop_time=stop_time)))
-    names, data = _column_table(result.columns)
+    names, data = column_table(result.columns)
     out.mkdir()
     variables = {n: data[:, [j]] for j, n in enumerate(names)}
-    scipy.io.savemat(out / "run.mat", {**variables, "meta": _matlab_meta(result.meta)}, format="5", oned_as="column")
+    scipy.io.savemat(out / "run.mat", {**variables, "meta": matlab_meta(result.meta)}, format="5", oned_as="column")
     (out / "metrics.json").write_text(json.dumps(json_safe(result.metrics), indent=2) + "\n")
     (out / "run.csv").write_bytes(per_row_csv(names, data))
     return time.perf_counter() - t0
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stop-time", type=float, default=100.0)
     args = parser.parse_args(argv)
 
-    from pendulab.analysis.results import _column_table, _csv_bytes, write_results
+    from pendulab.analysis.results import column_table, csv_bytes, write_results
     from pendulab.control.controller import demo_controller
     from pendulab.simulation import simulate
     from pendulab.spec import RunSpec, Timing
@@ -97,11 +97,11 @@ def main(argv: list[str] | None = None) -> int:
             times["end to end"].append(t2 - t0)
             times["simulation"].append(t1 - t0)
             times["write_results"].append(t2 - t1)
-            names, data = _column_table(result.columns)
+            names, data = column_table(result.columns)
             t3 = time.perf_counter()
             scipy.io.savemat(Path(tmp, "x.mat"), {n: data[:, j : j + 1] for j, n in enumerate(names)}, format="5", oned_as="column")
             t4 = time.perf_counter()
-            _csv_bytes(names, data)  # timed, not kept
+            csv_bytes(names, data)  # timed, not kept
             t5 = time.perf_counter()
             per_row_csv(names, data)  # timed, not kept
             t6 = time.perf_counter()

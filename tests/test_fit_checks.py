@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from pendulab.calibration._simulation import simulate
+from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, an independent replay of the log
 from pendulab.calibration.files import load_calibration
 from pendulab.calibration.fit import fit_parameters, ramp_start
 from pendulab.calibration.logs import RampLog, write_log

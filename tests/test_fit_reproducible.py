@@ -11,11 +11,11 @@ import os
 import subprocess
 import sys
 
-from pendulab.calibration._replay import EXACT_MATH
+from pendulab.calibration._replay import EXACT_MATH  # private: the replay's compiler flags are what this checks
 
 SCRIPT = """
 import hashlib, numpy as np
-from pendulab.calibration._replay import replay
+from pendulab.calibration._replay import replay  # private: the replay's bitwise reproducibility is what this checks
 from pendulab.calibration.synthetic import RIGS, synthetic_log
 log = synthetic_log("random steps", RIGS["sticky"], duration=3.0, voltage_noise=0.0)
 rng = np.random.default_rng(5)

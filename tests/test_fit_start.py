@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from pendulab.calibration import _polish
-from pendulab.calibration._replay import replay
-from pendulab.calibration._start import breakaway_voltage, drive_and_drag, log_start
+from pendulab.calibration import _polish  # private: the fit's denoising and anchors are what these tests check
+from pendulab.calibration._replay import replay  # private: the fit's replay judges the start values
+from pendulab.calibration._start import breakaway_voltage, drive_and_drag, log_start  # private: the start rule is what these tests check
 from pendulab.calibration.extract import motor_constants
-from pendulab.calibration.fit import _initial_states, _noise_level
+from pendulab.calibration.fit import _initial_states, _noise_level  # private: the fit's start states and noise level
 from pendulab.calibration.synthetic import RIGS as ALL_RIGS
 from pendulab.calibration.synthetic import TRUE, synthetic_log
 from pendulab.model.parameters import PlantParameters

@@ -8,6 +8,7 @@ imports inside functions included), so the test sees imports that a run would on
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -86,6 +87,57 @@ def test_no_package_imports_another_packages_private_names():
             private += [part for part in module.split(".")[2:] if part.startswith("_") and not part.startswith("__")]
             if private:
                 offenders.append(f"{path.relative_to(ROOT)}:{line} imports {', '.join(private)} from {module}")
+    assert not offenders, "\n".join(offenders)
+
+
+#: A test or a benchmark may reach into a private name only with a comment saying why, on the import's
+#: line(s) or the line above: ``# private: <why>`` (for example, a benchmark of the fit's internals).
+PRIVATE_WHY = re.compile(r"#\s*private:\s*\S.{9,}")
+
+
+def private_imports(path: Path) -> list[tuple[int, int, str, list[str]]]:
+    """``(first line, last line, module, private names)`` of every import of private pendulab names in a file
+    (a name with a leading underscore, or a module on a private path such as ``pendulab.calibration._replay``)."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").split(".")[0] == "pendulab":
+            modules = [(node.module, [alias.name for alias in node.names])]
+        elif isinstance(node, ast.Import):
+            modules = [(alias.name, []) for alias in node.names if alias.name.split(".")[0] == "pendulab"]
+        else:
+            continue
+        for module, names in modules:
+            private = [part for part in module.split(".")[1:] if part.startswith("_") and not part.startswith("__")]
+            private += [n for n in names if n.startswith("_") and not n.startswith("__")]
+            if private:
+                found.append((node.lineno, node.end_lineno or node.lineno, module, private))
+    return found
+
+
+def test_the_private_import_reader_sees_every_form(tmp_path):
+    source = tmp_path / "sample.py"
+    source.write_text("import pendulab.calibration._replay\n"
+                      "from pendulab.analysis.results import json_safe, _hidden\n"
+                      "from pendulab.calibration import (\n    _polish,  # private: the polish is what this measures\n)\n"
+                      "from pendulab.spec import RunSpec\n"
+                      "def f():\n    from pendulab.cosim._plan import run\n")
+    found = [(first, last, module, names) for first, last, module, names in private_imports(source)]
+    assert found == [(1, 1, "pendulab.calibration._replay", ["_replay"]), (2, 2, "pendulab.analysis.results", ["_hidden"]),
+                     (3, 5, "pendulab.calibration", ["_polish"]), (8, 8, "pendulab.cosim._plan", ["_plan"])]
+    lines = source.read_text().splitlines()
+    assert [bool(PRIVATE_WHY.search("\n".join(lines[max(first - 2, 0) : last]))) for first, last, _, _ in found] == [False, False, True, False]
+
+
+@pytest.mark.parametrize("folder", ["bench", "tests"])
+def test_bench_and_tests_import_private_names_only_saying_why(folder):
+    """The bench and the tests use pendulab's public names; where one measures or checks a private piece
+    (the fit's replay, a compile helper), a ``# private: why`` comment says so at the import."""
+    offenders = []
+    for path in sorted((ROOT / folder).glob("*.py")):
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for first, last, module, names in private_imports(path):
+            if not PRIVATE_WHY.search("\n".join(lines[max(first - 2, 0) : last])):
+                offenders.append(f"{folder}/{path.name}:{first} imports {', '.join(names)} from {module} without a '# private: why' comment")
     assert not offenders, "\n".join(offenders)
 
 

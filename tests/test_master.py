@@ -11,7 +11,7 @@ import pytest
 
 from pendulab.control.controller import demo_controller, unstable_example
 from pendulab.control.realization import discretize
-from pendulab.cosim.master import Event, Master, SimulationError, _native_runner
+from pendulab.cosim.master import Event, Master, SimulationError, native_runner
 from pendulab.cosim.pendulum import RECORDED, pendulum_system
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
@@ -45,7 +45,7 @@ def run(system: System, stop_time: float, record, native: bool, **kw) -> dict[st
 
 def test_the_native_runner_is_available():
     """Without a C compiler the master falls back to the Python loop; on this machine it must not."""
-    assert _native_runner() is not None
+    assert native_runner() is not None
 
 
 # ---------------------------------------------------------------- native runner == Python loop

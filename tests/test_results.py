@@ -285,7 +285,7 @@ def test_runlog_rows_survive_a_process_that_never_closes(tmp_path):
 def test_csv_numbers_match_python_formatting_to_15_digits():
     # An independent reference: Python's own '%.15g' (correctly rounded) for every kind of number the
     # writer handles; the vectorized rounding may differ from it by one unit in the 15th digit on a tie.
-    from pendulab.analysis.results import _csv_bytes
+    from pendulab.analysis.results import csv_bytes
 
     rng = np.random.default_rng(3)
     values = np.concatenate([
@@ -295,7 +295,7 @@ def test_csv_numbers_match_python_formatting_to_15_digits():
          np.nan, np.inf, -np.inf, 123456789012345678.0,
          -1.2345678901234567e-290],  # beyond the table's exponents, and its repr is 24 characters long
     ])
-    text = _csv_bytes(["v"], values[:, None]).decode()
+    text = csv_bytes(["v"], values[:, None]).decode()
     lines = text.split("\n")
     assert lines[0] == "v" and lines[-1] == "" and len(lines) == values.size + 2
     for value, line in zip(values, lines[1:-1]):
@@ -307,4 +307,4 @@ def test_csv_numbers_match_python_formatting_to_15_digits():
             assert line == repr(float(value))
     assert lines[1 + 3000 : 1 + 3016] == ["0", "0", "1", "-1", "10", "1e-1", "1e-3", "1e-4", "1e-5",
                                           "100000000000000", "1e15", "1e16", "2", "-2.5", "1.2345e3", "120"]
-    assert _csv_bytes(["a", "b"], np.zeros((0, 2))) == b"a,b\n"
+    assert csv_bytes(["a", "b"], np.zeros((0, 2))) == b"a,b\n"

@@ -137,7 +137,7 @@ def test_readme_install_runs_without_a_compiler(wheel_env):
     probe = env.run([str(env.venv / "bin" / "python"), "-c",
                      "from pendulab.fmu.build import ensure_fmu; from pendulab.cosim import master; from pendulab.native import shared_library;"
                      "print(ensure_fmu('Plant')); print(shared_library(master.PLAN_RUNNER_SOURCE, flags=master.PLAN_RUNNER_FLAGS).path);"
-                     "print(master._native_runner() is not None)"])
+                     "print(master.native_runner() is not None)"])
     plant, runner, native = probe.stdout.split()
     assert "site-packages/pendulab/prebuilt/fmus/Plant.fmu" in plant and "site-packages/pendulab/prebuilt/plan_runner-" in runner
     assert native == "True"

@@ -90,7 +90,7 @@ def write_results(
     UserError
         The output folder cannot be created or written.
     """
-    names, data = _column_table(columns)
+    names, data = column_table(columns)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise UserError(f"output folder {out} is a file; give a folder name for --out")
@@ -99,7 +99,7 @@ def write_results(
     except OSError as exc:
         raise UserError(f"cannot create output folder {out}: {exc.strerror or exc}; choose another --out") from None
 
-    mat_meta = _matlab_meta(meta)
+    mat_meta = matlab_meta(meta)
     writers = {
         "mat": lambda f: scipy.io.savemat(
             f,
@@ -134,7 +134,39 @@ def write_results(
             tmp.unlink(missing_ok=True)
 
 
-def _column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
+def column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
+    """A run's columns as one table: the names in file order and a 2-D array, one column per name.
+
+    The order is the one every run file has: the required columns (:data:`COLUMNS`, or
+    :data:`SEESAW_COLUMNS` for a seesaw run, told by its ``theta`` column) first, then any other
+    column in the given order. :func:`write_results` writes this table; :func:`csv_bytes` formats it.
+
+    Parameters
+    ----------
+    columns : Mapping[str, array_like]
+        Column name -> 1-D array (or an n x 1 / 1 x n array); all of one length.
+
+    Returns
+    -------
+    names : list of str
+        The column names in file order.
+    data : numpy.ndarray
+        ``len(t) x len(names)`` floats.
+
+    Raises
+    ------
+    ValueError
+        A required column is missing, a name is not a MATLAB variable name, a column is not 1-D,
+        or the lengths differ.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> cols = {"extra": np.ones(3)} | {name: np.zeros(3) for name in COLUMNS}
+    >>> names, data = column_table(cols)
+    >>> names[0], names[-1], data.shape
+    ('t', 'extra', (3, 10))
+    """
     required = SEESAW_COLUMNS if "theta" in columns and "alpha" not in columns else COLUMNS
     missing = [name for name in required if name not in columns]
     if missing:
@@ -300,8 +332,30 @@ def _csv_blocks(names: Sequence[str], data: np.ndarray) -> Iterator[bytes]:
         yield _csv_rows(data[i : i + _CSV_BLOCK_ROWS])
 
 
-def _csv_bytes(names: Sequence[str], data: np.ndarray) -> bytes:
-    """The CSV text of a table (header, then one line per row), formatted as whole arrays."""
+def csv_bytes(names: Sequence[str], data: np.ndarray) -> bytes:
+    """The CSV text of a table (header, then one line per row), formatted as whole arrays.
+
+    The text ``run.csv`` holds (:func:`write_results` writes it block by block, the same bytes):
+    15 significant digits, trailing zeros dropped (``2``, ``1e-3``).
+
+    Parameters
+    ----------
+    names : Sequence[str]
+        The header's column names.
+    data : numpy.ndarray
+        ``rows x len(names)`` floats.
+
+    Returns
+    -------
+    bytes
+        ASCII text, each line ending in ``\\n``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> csv_bytes(["t", "x"], np.array([[0.0, 2.0], [0.001, -1.5]]))
+    b't,x\\n0,2\\n1e-3,-1.5\\n'
+    """
     return b"".join(_csv_blocks(names, data))
 
 
@@ -314,7 +368,29 @@ def _csv_rows(data: np.ndarray) -> bytes:
     return words.tobytes().translate(None, b"\0")
 
 
-def _matlab_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
+def matlab_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's ``meta`` as :func:`scipy.io.savemat` writes it into ``run.mat``'s ``meta`` struct.
+
+    Every field of :data:`META_FIELDS` is present (empty when not given; ``version`` is this
+    pendulab's unless given); nested mappings become structs, ``None`` an empty matrix, number lists
+    row vectors, other lists cell arrays, and names are made MATLAB field names.
+
+    Parameters
+    ----------
+    meta : Mapping[str, Any]
+        The run's description (:func:`pendulab.simulation.run_meta`), JSON-like data or dataclasses.
+
+    Returns
+    -------
+    dict
+        Field name -> value, ready for ``scipy.io.savemat(path, {"meta": ...})``.
+
+    Examples
+    --------
+    >>> m = matlab_meta({"pendulum": "long", "step": 0.001, "poke": [220, 0.005, 1]})
+    >>> m["pendulum"], m["poke"].shape, m["calibration"].shape
+    ('long', (1, 3), (0, 0))
+    """
     merged: dict[str, Any] = {name: None for name in META_FIELDS}
     merged["version"] = pendulab.__version__
     merged.update(meta)

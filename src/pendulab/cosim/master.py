@@ -30,7 +30,7 @@ from pendulab.cosim.component import BASE_TYPES, C_TYPES, Component, SimulationE
 from pendulab.cosim.system import System
 from pendulab.errors import UserError
 
-__all__ = ["Event", "Master", "SimulationError"]
+__all__ = ["Event", "Master", "SimulationError", "native_runner"]
 
 @dataclass
 class Event:
@@ -213,7 +213,7 @@ class Master:
         reset_after_step: list[tuple[Component, str, Any]] = []
         phase_a, late, recorders, steps = plan.phase_a, plan.late, plan.recorders, plan.steps
 
-        runner = _native_runner() if self.native else None
+        runner = native_runner() if self.native else None
         if runner is not None:
             return self._run_native(runner, plan, time, n_steps, h, pending, stop_when, progress)
         for k in range(n_steps + 1):
@@ -279,8 +279,24 @@ PLAN_RUNNER_SOURCE = Path(__file__).parent / "c" / "plan_runner.c"
 PLAN_RUNNER_FLAGS = ("-O2", "-std=c99")
 
 
-def _native_runner() -> Any | None:
-    """The compiled plan runner (prebuilt in a wheel, else compiled on first use); None without one."""
+def native_runner() -> Any | None:
+    """The compiled plan runner (prebuilt in a wheel, else compiled on first use); None without one.
+
+    :meth:`Master.run` with ``native=True`` runs its step loop through it; without it (no C compiler
+    and no prebuilt runner) the Python loop runs the same plan, slower, with bit-identical logs.
+
+    Returns
+    -------
+    ctypes function or None
+        ``pendulab_run_plan`` of the shared library built from :data:`PLAN_RUNNER_SOURCE` with
+        :data:`PLAN_RUNNER_FLAGS` (found or built once per process), or ``None``.
+
+    Examples
+    --------
+    >>> runner = native_runner()
+    >>> runner is None or runner.__name__ == "pendulab_run_plan"
+    True
+    """
     if not _RUNNER:
         from pendulab.native import shared_library
 
