@@ -142,6 +142,8 @@ class Plant:
                 seesaw = seesaw.with_values(**load_calibration(self.calibration).values)
             return seesaw.with_values(**self.overrides) if self.overrides else seesaw
 
+        if "_parameters" in self.__dict__:
+            return self.__dict__["_parameters"]
         params = PlantParameters.preset(pendulum=self.pendulum, cart=self.cart)
         if self.calibration:
             from pendulab.calibration.files import load_calibration
@@ -149,6 +151,10 @@ class Plant:
             params = load_calibration(self.calibration).apply(params)
         if self.overrides:
             params = params.with_values(**self.overrides)
+        if not self.calibration:
+            # Kept: validate() and the run both ask for them, and a frozen section's parameters cannot change
+            # (a calibration file is read each time: it may have been rewritten).
+            self.__dict__["_parameters"] = params
         return params
 
 

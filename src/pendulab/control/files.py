@@ -38,9 +38,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from pendulab.analysis.results import atomic_write
 from pendulab.control.controller import Controller, _one_line
 from pendulab.errors import ControllerError
+from pendulab.outputs import atomic_write
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -276,15 +276,29 @@ class SweepSpec:
         )
 
     def controller_at(self, point: Mapping[str, float]) -> Any:
-        """The :class:`~pendulab.control.controller.Controller` of one grid point."""
+        """The :class:`~pendulab.control.controller.Controller` of one grid point (built once per point: a
+        point's runs come one after another, and a Controller is immutable)."""
         from pendulab.control.controller import Controller
 
+        key = tuple(point.items())
+        cache = self.__dict__.setdefault("_controllers", {})
+        if key in cache:
+            return cache[key]
+        if len(cache) > 64:
+            cache.clear()
         if "pid" in self.controller:
-            return Controller.pid(**{**self.controller["pid"], **point})
-        data = json.loads(json.dumps(self.controller))
-        for name, value in point.items():
-            _set_number(data, name, value)
-        return Controller.from_dict(data)
+            controller = Controller.pid(**{**self.controller["pid"], **point})
+        else:
+            data = json.loads(json.dumps(self.controller))
+            for name, value in point.items():
+                _set_number(data, name, value)
+            controller = Controller.from_dict(data)
+        cache[key] = controller
+        return controller
+
+    def __getstate__(self) -> dict[str, Any]:
+        # What a worker receives: the spec, not the controllers this process built.
+        return {k: v for k, v in self.__dict__.items() if k != "_controllers"}
 
 
 def _toml(value: Any) -> str:
