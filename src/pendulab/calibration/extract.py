@@ -56,7 +56,7 @@ import numpy as np
 from scipy.optimize import OptimizeWarning, least_squares
 
 from pendulab.calibration.files import Calibration
-from pendulab.calibration.logs import RampLog
+from pendulab.calibration.logs import RampLog, encoder_step
 from pendulab.errors import CalibrationError
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
@@ -202,19 +202,6 @@ def _find_pushes(log: RampLog) -> list[_Push]:
     return [
         _Push(p.start, p.release, pushes[i + 1].start if i + 1 < len(pushes) else len(V), p.rate) for i, p in enumerate(pushes)
     ]
-
-
-def _encoder_step(x: np.ndarray) -> float:
-    """The smallest position step that occurs repeatedly (the encoder resolution), 0 if unquantized."""
-    dx = np.abs(np.diff(x))
-    dx = dx[dx > 1e-12]
-    if dx.size < 10:
-        return 0.0
-    smallest = np.sort(dx)[: max(5, dx.size // 100)]
-    q = float(np.median(smallest))
-    # Quantized data: most steps are whole multiples of q.
-    multiples = dx / q
-    return q if np.mean(np.abs(multiples - np.round(multiples)) < 0.05) > 0.9 else 0.0
 
 
 def _onset_voltage(t: np.ndarray, V: np.ndarray, x: np.ndarray, x_rest: float, direction: int, j: int, k: int) -> float:
@@ -368,7 +355,7 @@ def extract_friction(
     Mc = params.lumped_cart_mass
     where = f"log {log.source}" if log.source else "log"
     t, V, x, dt = log.t, log.V, log.x, log.period
-    q = _encoder_step(x)
+    q = encoder_step(x)
     pushes = _find_pushes(log)
     ramps = [p for p in pushes if abs(p.rate) < PROBE_RATE_THRESHOLD]
     if not ramps:

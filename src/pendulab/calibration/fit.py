@@ -97,7 +97,7 @@ import casadi as ca
 import numpy as np
 
 from pendulab.calibration.files import FITTED_NAMES, Calibration
-from pendulab.calibration.logs import RampLog
+from pendulab.calibration.logs import RampLog, encoder_step
 from pendulab.errors import CalibrationError, FitRejected
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
@@ -305,16 +305,9 @@ def fit_model(width_scale: float = 1.0) -> tuple[ca.Function, ca.Function]:
     return ode, rk4
 
 
-def _encoder_step(x: np.ndarray) -> float:
-    """The encoder step of logged positions (or angles): the smallest change between samples (0 if none)."""
-    dx = np.abs(np.diff(x))
-    steps = dx[dx > 1e-12]
-    return float(np.min(steps)) if steps.size else 0.0
-
-
 def _noise_level(x: np.ndarray) -> float:
     """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
-    return max(float(np.std(np.diff(x, 2))) / math.sqrt(6), _encoder_step(x) / math.sqrt(12), 1e-6)
+    return max(float(np.std(np.diff(x, 2))) / math.sqrt(6), encoder_step(x) / math.sqrt(12), 1e-6)
 
 
 def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
@@ -368,7 +361,7 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
         length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
         # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
-        edges = np.array(sorted(k for span in rests(log.x, _encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
+        edges = np.array(sorted(k for span in rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
         stride = max(M, (length // 8) // M * M)
         for first in range(0, len(log) - length + 1, stride):
             changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))

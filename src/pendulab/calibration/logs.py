@@ -106,6 +106,28 @@ class RampLog:
         return replace(self, t=self.t[keep], V=self.V[keep], x=self.x[keep], alpha=alpha)
 
 
+def encoder_step(x: np.ndarray) -> float:
+    """The encoder step of logged positions (or angles): the smallest change that recurs, 0 if unquantized.
+
+    The one rule for the ramp-test extraction and the fit (its rests and noise floor). Quantized data
+    changes by whole multiples of one step; the step is the median of the smallest changes, so that a
+    stray tiny difference (a rounding in a CSV) does not pass for it.
+
+    Examples
+    --------
+    >>> x = 2e-5 * np.round(np.cumsum(np.random.default_rng(1).normal(0, 1e-4, 500)) / 2e-5)
+    >>> round(encoder_step(x) * 1e6, 3), encoder_step(np.linspace(0, 1, 50) ** 2)
+    (20.0, 0.0)
+    """
+    dx = np.abs(np.diff(np.asarray(x, dtype=float)))
+    dx = dx[dx > 1e-12]
+    if dx.size < 10:
+        return 0.0
+    q = float(np.median(np.sort(dx)[: max(5, dx.size // 100)]))
+    multiples = dx / q
+    return q if np.mean(np.abs(multiples - np.round(multiples)) < 0.05) > 0.9 else 0.0
+
+
 def validate_log(log: RampLog) -> None:
     """Raise :class:`CalibrationError` (one line) for unequal lengths, NaN or non-increasing time."""
     where = f"log {log.source}" if log.source else "log"
