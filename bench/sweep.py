@@ -131,19 +131,23 @@ def main() -> int:
         c0, k0, w0 = time.process_time(), cpu_children(), time.perf_counter()
         result = sweep(spec, Path(tmp) / "out", workers=args.workers, plots=False)
         wall = time.perf_counter() - w0
-        core = (time.process_time() - c0) + (cpu_children() - k0)
+        parent, children = time.process_time() - c0, cpu_children() - k0
+        core = parent + children
     n = spec.n_runs
     sweep_rate = n / core
     single_rate, bare_rate = 1 / single_s, 1 / bare_s
 
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+          f"load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min) at the end")
     print(f"runs: {stop:g} s at 1 kHz (3 FMUs), demo controller gain x {samples} rigs; the sweep: {n} runs on {result.engine}")
     print(f"{'variant':<34}{'runs per core-s':>16}{'core-ms per run':>17}")
     print(f"{'pendulab.simulate one by one':<34}{single_rate:>16.1f}{1e3 * single_s:>17.2f}")
     print(f"{'bare stepping loop':<34}{bare_rate:>16.1f}{1e3 * bare_s:>17.2f}")
     print(f"{'simulate, FMUs kept (no engine)':<34}{1 / reuse_s:>16.1f}{1e3 * reuse_s:>17.2f}")
     print(f"{'sweep (' + str(args.workers) + ' workers, all included)':<34}{sweep_rate:>16.1f}{1e3 / sweep_rate:>17.2f}")
-    print(f"sweep wall clock: {n / wall:.1f} runs/s ({wall:.1f} s for {n} runs; {core:.1f} core-s)")
+    print(f"sweep wall clock: {n / wall:.1f} runs/s ({wall:.1f} s for {n} runs; {core:.1f} core-s: "
+          f"{parent:.2f} in the sweep's own process, {children:.2f} in its workers)")
     print(f"statuses: {', '.join(f'{v} {k}' for k, v in result.counts.items() if v)}")
     ratio_single, ratio_bare = sweep_rate / single_rate, sweep_rate / bare_rate
     ok_single, ok_bare = ratio_single >= ONE_BY_ONE_BAR, ratio_bare >= BARE_BAR

@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -26,6 +26,24 @@ import numpy as np
 
 from pendulab.errors import UserError
 from pendulab.spec import RunSpec
+
+
+class _BuiltOnUse:
+    """A dataclass field holding a dict, or a function that builds it on first read (None: an empty dict)."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.slot = f"_{name}"
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:
+            return None  # the field's default
+        value = obj.__dict__[self.slot]
+        if callable(value):
+            value = obj.__dict__[self.slot] = value()
+        return value
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        obj.__dict__[self.slot] = {} if value is None else value
 
 
 @dataclass
@@ -58,9 +76,13 @@ class SimulationResult:
 
     columns: dict[str, np.ndarray]
     metrics: dict[str, Any]
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, Any] = _BuiltOnUse()  # type: ignore[assignment]
     spec: RunSpec | None = None
     verdict: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        self.meta  # noqa: B018 - built before pickling (a function cannot be pickled)
+        return self.__dict__
 
     def write(self, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
         """Write ``run.mat``, ``run.csv`` and ``metrics.json`` into ``out_dir``; returns their paths by kind."""
@@ -177,11 +199,15 @@ def simulate(
     metrics.update(moments)
     for name in record:
         columns[name] = np.asarray(log[name])
-    info = run_meta(spec, params)
+    extra = dict(meta or {})
     if modes:
-        info.update(recentre=spec.supervisor.recentre, swing_up=spec.supervisor.swing_up, start=spec.plant.start,
-                    mode_events=mode_events(columns["t"], columns["supervisor_state"], recentring=columns["recentring"]))
-    info.update(meta or {})
+        extra = {"recentre": spec.supervisor.recentre, "swing_up": spec.supervisor.swing_up, "start": spec.plant.start,
+                 "mode_events": mode_events(columns["t"], columns["supervisor_state"], recentring=columns["recentring"]), **extra}
+
+    def info() -> dict[str, Any]:
+        return {**run_meta(spec, params), **extra}
+
+    # The meta (the spec's JSON among it) is built when it is first read: a sweep's runs never read it.
     return SimulationResult(columns, metrics, info, spec, verdict)
 
 
