@@ -11,11 +11,11 @@ from pathlib import Path
 from typing import Mapping
 
 import control
+import fmi_harness
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import extract
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave
 
 from pendulab.control.controller import Controller, Factor, demo_controller, unstable_example
 from pendulab.control.realization import MAX_ORDER, discretize
@@ -59,52 +59,30 @@ def unzipdir(controller_fmu: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     return Path(extract(str(controller_fmu), unzipdir=str(tmp_path_factory.mktemp("Controller"))))
 
 
-@pytest.fixture(scope="module")
-def refs(unzipdir: Path) -> dict[str, int]:
-    return {v.name: v.valueReference for v in read_model_description(str(unzipdir)).modelVariables}
-
-
-class ControllerSlave:
+class ControllerSlave(fmi_harness.Slave):
     """Controller.fmu through fmpy, initialized with the given start values."""
 
-    def __init__(self, unzipdir: Path, refs: Mapping[str, int], start: Mapping[str, float]):
-        md = read_model_description(str(unzipdir))
-        self.refs = refs
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unzipdir), modelIdentifier="Controller", instanceName="controller")
-        self.fmu.instantiate()
-        self.t = 0.0
-        try:
-            self.fmu.setupExperiment(startTime=0.0)
-            self.fmu.enterInitializationMode()
-            for name, value in start.items():
-                if name == "n":
-                    self.fmu.setInteger([refs[name]], [int(value)])
-                else:
-                    self.fmu.setReal([refs[name]], [float(value)])
-            self.fmu.exitInitializationMode()
-        except BaseException:
-            self.fmu.freeInstance()
-            raise
+    def __init__(self, unzipdir: Path, start: Mapping[str, float]):
+        super().__init__(unzipdir, start, name="controller")
 
     def respond(self, r=None, alpha=None, h: float = H) -> np.ndarray:
         """``V_command`` for the input sequence (reference ``r`` or measured angle ``alpha``)."""
         name, values = ("r", r) if r is not None else ("alpha_measured", alpha)
         out = np.empty(len(values))
         for k, value in enumerate(values):
-            self.fmu.setReal([self.refs[name]], [float(value)])
-            out[k] = self.fmu.getReal([self.refs["V_command"]])[0]
-            self.fmu.doStep(self.t, h)
-            self.t += h
+            self.set({name: value})
+            out[k] = self.get(["V_command"])[0]
+            self.step(h)
         return out
 
     def close(self) -> None:
-        self.fmu.terminate()
-        self.fmu.freeInstance()
+        self.terminate()
+        super().close()
 
 
-def fmu_response(unzipdir, refs, controller, method, u, *, via_angle=False) -> np.ndarray:
+def fmu_response(unzipdir, controller, method, u, *, via_angle=False) -> np.ndarray:
     lti = discretize(controller, h=H, method=method)
-    slave = ControllerSlave(unzipdir, refs, {**lti.to_parameters(), "h": H, "Lp": LP})
+    slave = ControllerSlave(unzipdir, {**lti.to_parameters(), "h": H, "Lp": LP})
     try:
         return slave.respond(alpha=-u / LP) if via_angle else slave.respond(r=u)
     finally:
@@ -133,31 +111,31 @@ def excitation() -> np.ndarray:
 
 @pytest.mark.parametrize("method", ["tustin", "zoh"])
 @pytest.mark.parametrize("name", list(CONTROLLERS))
-def test_fmu_response_equals_control_c2d(unzipdir, refs, name, method):
+def test_fmu_response_equals_control_c2d(unzipdir, name, method):
     controller = CONTROLLERS[name]
     u = excitation()
-    y = fmu_response(unzipdir, refs, controller, method, u)
+    y = fmu_response(unzipdir, controller, method, u)
     reference = c2d_response(controller, method, u)
     assert np.max(np.abs(reference)) > 1e-3
     assert np.max(np.abs(y - reference)) <= 1e-9 * np.max(np.abs(reference))
 
 
 @pytest.mark.parametrize("method", ["tustin", "zoh"])
-def test_demo_equals_c2d_of_its_transfer_function(unzipdir, refs, method):
+def test_demo_equals_c2d_of_its_transfer_function(unzipdir, method):
     """For a low order, c2d straight of the polynomial transfer function G(s) = num/den."""
     controller = demo_controller()
     u = excitation()
-    y = fmu_response(unzipdir, refs, controller, method, u)
+    y = fmu_response(unzipdir, controller, method, u)
     gd = control.c2d(controller.transfer_function(), H, method=method)
     reference = control.forced_response(gd, U=u).outputs
     assert np.max(np.abs(y - reference)) <= 1e-8 * np.max(np.abs(reference))
 
 
-def test_the_error_is_formed_from_the_measured_angle(unzipdir, refs):
+def test_the_error_is_formed_from_the_measured_angle(unzipdir):
     """e = r - Lp*alpha_measured: feeding alpha = -u/Lp gives the response to u."""
     u = excitation()
-    via_r = fmu_response(unzipdir, refs, demo_controller(), "tustin", u)
-    via_angle = fmu_response(unzipdir, refs, demo_controller(), "tustin", u, via_angle=True)
+    via_r = fmu_response(unzipdir, demo_controller(), "tustin", u)
+    via_angle = fmu_response(unzipdir, demo_controller(), "tustin", u, via_angle=True)
     np.testing.assert_allclose(via_angle, via_r, rtol=1e-12, atol=1e-12 * np.max(np.abs(via_r)))
 
 
@@ -180,13 +158,13 @@ def test_the_loop_runs_the_discretized_controller(loop_fmus):
 
 # ---------------------------------------------------------------- refusals
 @pytest.mark.parametrize("n", [MAX_ORDER + 1, -1])
-def test_an_order_beyond_16_is_refused(unzipdir, refs, n):
+def test_an_order_beyond_16_is_refused(unzipdir, n):
     with pytest.raises(FMICallException):
-        ControllerSlave(unzipdir, refs, {"n": n})
+        ControllerSlave(unzipdir, {"n": n})
 
 
-def test_an_order_16_with_nothing_else_set_is_accepted(unzipdir, refs):
-    slave = ControllerSlave(unzipdir, refs, {"n": MAX_ORDER})
+def test_an_order_16_with_nothing_else_set_is_accepted(unzipdir):
+    slave = ControllerSlave(unzipdir, {"n": MAX_ORDER})
     try:
         assert np.all(slave.respond(r=np.ones(3)) == 0)
     finally:
@@ -194,9 +172,9 @@ def test_an_order_16_with_nothing_else_set_is_accepted(unzipdir, refs):
 
 
 @pytest.mark.parametrize("h", [2e-3, 5e-4, 1.01e-3])
-def test_a_step_other_than_the_sample_period_is_refused(unzipdir, refs, h):
+def test_a_step_other_than_the_sample_period_is_refused(unzipdir, h):
     lti = discretize(demo_controller(), h=H)
-    slave = ControllerSlave(unzipdir, refs, {**lti.to_parameters(), "h": H})
+    slave = ControllerSlave(unzipdir, {**lti.to_parameters(), "h": H})
     try:
         slave.respond(r=np.ones(2))  # the period it was made for is fine
         with pytest.raises(FMICallException):
@@ -206,6 +184,6 @@ def test_a_step_other_than_the_sample_period_is_refused(unzipdir, refs, h):
 
 
 @pytest.mark.parametrize("name, value", [("h", 0.0), ("h", -1e-3), ("D", float("nan")), ("A[1,1]", float("inf"))])
-def test_bad_parameters_are_refused_at_initialization(unzipdir, refs, name, value):
+def test_bad_parameters_are_refused_at_initialization(unzipdir, name, value):
     with pytest.raises(FMICallException):
-        ControllerSlave(unzipdir, refs, {"n": 1, name: value})
+        ControllerSlave(unzipdir, {"n": 1, name: value})

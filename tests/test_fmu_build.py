@@ -3,7 +3,6 @@ documented parameters, and the build commands (issue 2, must-show 2; SPEC §6)."
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 import subprocess
@@ -15,8 +14,8 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pytest
+from fmi_harness import hanging_plant_run
 from fmpy import extract, read_model_description, supported_platforms
-from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
 
 from pendulab.fmu.build import FMI_HEADERS, WIN64_COMPILER, is_current
@@ -25,39 +24,6 @@ from pendulab.model.plant import STATES
 
 BIN = Path(sys.executable).parent
 OUTPUTS = ("x", "xdot", "alpha", "alphadot", "alpha_measured", "x_measured", "V_applied", "F_friction")
-
-
-def run_cs(unzipdir: Path, n_steps: int = 1500, step: float = 1e-3) -> np.ndarray:
-    """States after each step: hanging pendulum released at 0.3 rad, V a 1 Hz sine of 12 V (saturating)."""
-    md = read_model_description(str(unzipdir))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, modelIdentifier="Plant", unzipDirectory=str(unzipdir), instanceName="plant")
-    fmu.instantiate()
-    try:
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.setReal([vr["alpha"]], [math.pi + 0.3])
-        fmu.exitInitializationMode()
-        rows = []
-        for k in range(n_steps):
-            fmu.setReal([vr["V"]], [12.0 * math.sin(2 * math.pi * k * step)])
-            fmu.doStep(k * step, step)
-            rows.append(fmu.getReal([vr[s] for s in STATES]))
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
-    return np.array(rows)
-
-
-# ---------------------------------------------------------------- validation
-def test_fmpy_validate_finds_no_problem(plant_fmu: Path) -> None:
-    assert validate_fmu(str(plant_fmu)) == []
-
-
-def test_fmpy_validate_command_line(plant_fmu: Path) -> None:
-    result = subprocess.run([str(BIN / "fmpy"), "validate", str(plant_fmu)], capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stdout + result.stderr
-    assert "No problems found" in result.stdout
 
 
 def test_model_exchange_and_co_simulation_in_one_fmu(plant_fmu: Path) -> None:
@@ -208,7 +174,7 @@ def test_binary_runs_in_a_plain_c_host(plant_unzipdir: Path, tmp_path: Path) -> 
     )
     assert result.returncode == 0, result.stderr
     c_states = np.array([float(v) for v in result.stdout.split()])
-    np.testing.assert_array_equal(c_states, run_cs(plant_unzipdir, n)[-1])
+    np.testing.assert_array_equal(c_states, hanging_plant_run(plant_unzipdir, n)[-1])
 
 
 # ---------------------------------------------------------------- sources/ rebuild the binary
@@ -245,7 +211,7 @@ def test_fmpy_compile_rebuilds_the_binary_from_sources(plant_fmu: Path, plant_un
     assert validate_fmu(str(stripped)) == []
     rebuilt = Path(extract(str(stripped), unzipdir=str(tmp_path / "rebuilt")))
     # Another compiler configuration (CMake Release) may round differently in the last bits, no more.
-    np.testing.assert_allclose(run_cs(rebuilt), run_cs(plant_unzipdir), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(hanging_plant_run(rebuilt), hanging_plant_run(plant_unzipdir), rtol=1e-12, atol=1e-12)
 
 
 # ---------------------------------------------------------------- the build commands

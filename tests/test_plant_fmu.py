@@ -3,35 +3,23 @@ and independent FMI engines give fmpy's trajectory (issue 2, must-shows 3 and 4;
 
 from __future__ import annotations
 
-import ctypes
 import math
-import platform
-from ctypes import CFUNCTYPE, c_char_p, c_double, c_int, c_void_p
+from ctypes import c_double
 from pathlib import Path
 from typing import Mapping, Sequence
 
+import fmi_harness
 import numpy as np
 import pytest
-from fmpy import calloc, free, read_model_description, simulate_fmu
+from fmi_harness import VARARGS_AS_FIXED, Slave, capturing_callbacks, value_references
+from fmpy import simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (
-    FMU2Model,
-    FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
-)
+from fmpy.fmi2 import FMU2Model
 
 from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import OUTPUTS, STATES, PlantModel
 
 ALL_OUTPUTS = (*STATES, *OUTPUTS)
-
-
-def value_references(unzipdir: Path) -> tuple[str, dict[str, int]]:
-    md = read_model_description(str(unzipdir))
-    return md.guid, {v.name: v.valueReference for v in md.modelVariables}
 
 
 def run_cs(
@@ -42,28 +30,7 @@ def run_cs(
     outputs: Sequence[str] = STATES,
 ) -> np.ndarray:
     """Co-simulate with fmpy: V held over each step; rows are ``outputs`` at t = 0, t1, ..., tn."""
-    guid, vr = value_references(unzipdir)
-    steps = np.broadcast_to(np.asarray(step, dtype=float), (len(voltages),))
-    fmu = FMU2Slave(guid=guid, modelIdentifier="Plant", unzipDirectory=str(unzipdir), instanceName="plant")
-    fmu.instantiate()
-    try:
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        if start:
-            fmu.setReal([vr[k] for k in start], [float(v) for v in start.values()])
-        fmu.exitInitializationMode()
-        refs = [vr[k] for k in outputs]
-        rows = [fmu.getReal(refs)]
-        t = 0.0
-        for v, h in zip(voltages, steps):
-            fmu.setReal([vr["V"]], [float(v)])
-            fmu.doStep(t, float(h))
-            t += float(h)
-            rows.append(fmu.getReal(refs))
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
-    return np.array(rows)
+    return fmi_harness.run_cs(unzipdir, outputs, {"V": voltages}, step=step, start=start)
 
 
 def reference(params: PlantParameters, voltages: Sequence[float], step: float = 1e-3, x0: Sequence[float] = (0, 0, 0, 0)) -> np.ndarray:
@@ -236,48 +203,21 @@ def test_model_exchange_derivatives_equal_the_casadi_ode(plant_unzipdir: Path) -
 
 
 # ---------------------------------------------------------------- bad parameters inside the FMU
-# The wrapper logs like FMI 2.0 says: logger(..., "%s", text). ctypes callbacks cannot take varargs, and
-# fmpy's addLoggerProxy keeps ONE global target (it would redirect fmpy's default logger to this test's
-# callback, which crashes once the callback is collected). On x86-64 and Linux aarch64 a variadic argument
-# arrives like a fixed one, so a sixth c_char_p parameter receives the text.
-_LoggerWithText = CFUNCTYPE(None, c_void_p, c_char_p, c_int, c_char_p, c_char_p, c_char_p)
-_VARARGS_AS_FIXED = platform.system() == "Linux" and platform.machine() in ("x86_64", "aarch64")
-
-
-def _capturing_callbacks(messages: list[str]) -> fmi2CallbackFunctions:
-    def logger(env, instance, status, category, message, first_arg):  # noqa: ANN001
-        text = first_arg if message == b"%s" and _VARARGS_AS_FIXED else message
-        messages.append(text.decode(errors="replace"))
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = ctypes.cast(_LoggerWithText(logger), fmi2CallbackLoggerTYPE)
-    callbacks._keep = logger  # the Structure keeps the C thunk; keep the closure too
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    return callbacks
-
-
 @pytest.mark.parametrize(
     "name, value, words",
     [("M_cart", -0.5, "M_cart = -0.5 is outside its range 0.01 to 100 kg"), ("Rm", 0.0, "Rm = 0 is outside"),
      ("Beq", math.nan, "Beq = nan is outside"), ("g", math.inf, "g = inf is outside"), ("Mp", -1.0, "Mp = -1 is outside")],
 )
 def test_fmu_refuses_a_parameter_out_of_its_range(plant_unzipdir: Path, name: str, value: float, words: str) -> None:
-    guid, vr = value_references(plant_unzipdir)
     messages: list[str] = []
-    callbacks = _capturing_callbacks(messages)
-    fmu = FMU2Slave(guid=guid, modelIdentifier="Plant", unzipDirectory=str(plant_unzipdir), instanceName="plant")
-    fmu.instantiate(callbacks=callbacks)
-    try:
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
+    with Slave(plant_unzipdir, callbacks=capturing_callbacks(messages), initialize=False) as plant:
+        plant.fmu.setupExperiment(startTime=0.0)
+        plant.fmu.enterInitializationMode()
         with pytest.raises(FMICallException):
-            fmu.setReal([vr[name]], [value])
-        fmu.exitInitializationMode()  # the refused value was not set: the defaults initialize
-        if _VARARGS_AS_FIXED:
+            plant.set({name: value})
+        plant.fmu.exitInitializationMode()  # the refused value was not set: the defaults initialize
+        if VARARGS_AS_FIXED:
             assert len(messages) == 1 and words in messages[0], messages
-    finally:
-        fmu.freeInstance()
 
 
 @pytest.mark.parametrize(
@@ -288,20 +228,15 @@ def test_fmu_refuses_a_parameter_out_of_its_range(plant_unzipdir: Path, name: st
 )
 def test_fmu_refuses_parameters_that_contradict_each_other(plant_unzipdir: Path, values: dict, words: str) -> None:
     """Each value within its range, but not together (or the cart starting beyond its end stop)."""
-    guid, vr = value_references(plant_unzipdir)
     messages: list[str] = []
-    fmu = FMU2Slave(guid=guid, modelIdentifier="Plant", unzipDirectory=str(plant_unzipdir), instanceName="plant")
-    fmu.instantiate(callbacks=_capturing_callbacks(messages))
-    try:
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.setReal([vr[n] for n in values], list(values.values()))
+    with Slave(plant_unzipdir, callbacks=capturing_callbacks(messages), initialize=False) as plant:
+        plant.fmu.setupExperiment(startTime=0.0)
+        plant.fmu.enterInitializationMode()
+        plant.set(values)
         with pytest.raises(FMICallException):
-            fmu.exitInitializationMode()
-        if _VARARGS_AS_FIXED:
+            plant.fmu.exitInitializationMode()
+        if VARARGS_AS_FIXED:
             assert len(messages) == 1 and words in messages[0], messages
-    finally:
-        fmu.freeInstance()
 
 
 def test_non_finite_input_is_an_error_not_a_saturated_voltage(plant_unzipdir: Path) -> None:
@@ -313,23 +248,11 @@ def test_non_finite_input_is_an_error_not_a_saturated_voltage(plant_unzipdir: Pa
 # ---------------------------------------------------------------- independent FMI engines
 def test_ecos_gives_the_fmpy_trajectory(plant_fmu: Path, plant_unzipdir: Path) -> None:
     """Ecos (ecospy) runs the same Plant.fmu: friction on, saturating V, 2 s with the poke."""
-    ecospy = pytest.importorskip("ecospy")
+    pytest.importorskip("ecospy")
     n = 2000
     V = saturating_voltage(n)
     start = {"alpha": math.pi + 0.2, "Beq": 3.0}
-    with ecospy.EcosSimulationStructure() as structure:
-        structure.add_model("plant", str(plant_fmu))
-        structure.add_parameter_set("initial", {f"plant::{k}": float(v) for k, v in start.items()})
-        with ecospy.EcosSimulation(structure=structure, step_size=1e-3) as sim:
-            assert sim.init(parameter_set="initial")
-            rows = [[sim.get_real(f"plant::{s}") for s in ALL_OUTPUTS]]
-            for v in V:
-                sim.set_real("plant::V", float(v))
-                sim.step()
-                rows.append([sim.get_real(f"plant::{s}") for s in ALL_OUTPUTS])
-            assert sim.get_time() == pytest.approx(n * 1e-3)
-            sim.terminate()
-    ecos = np.array(rows)
+    ecos = fmi_harness.ecos_run(plant_fmu, ALL_OUTPUTS, V, start)
     fmpy_run = run_cs(plant_unzipdir, V, start=start, outputs=ALL_OUTPUTS)
     assert np.ptp(ecos[:, 2]) > 0.3, "a real swing, not a resting state"
     np.testing.assert_allclose(ecos, fmpy_run, rtol=1e-9, atol=1e-12)

@@ -11,10 +11,9 @@ import math
 from pathlib import Path
 from typing import Mapping
 
+import fmi_harness
 import numpy as np
 import pytest
-from fmpy import read_model_description
-from fmpy.fmi2 import FMU2Slave
 
 from pendulab.model.parameters import PlantParameters
 
@@ -26,26 +25,8 @@ FRICTION_OFF = {"F1": 0.0, "F2": 0.0}
 def simulate(unzipdir: Path, params: PlantParameters, V: float, stop: float, step: float = 0.01,
              start: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
     """Co-simulate Plant.fmu with ``params`` (all of them set), a constant ``V`` and initial ``start`` states."""
-    md = read_model_description(str(unzipdir))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, modelIdentifier="Plant", unzipDirectory=str(unzipdir), instanceName="plant")
-    fmu.instantiate()
-    values = {**params.as_dict(), **(start or {}), "V": V}
-    try:
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.setReal([vr[k] for k in values], [float(v) for v in values.values()])
-        fmu.exitInitializationMode()
-        refs = [vr[s] for s in SIGNALS]
-        n = int(round(stop / step))
-        rows = [fmu.getReal(refs)]
-        for k in range(n):
-            fmu.doStep(k * step, step)
-            rows.append(fmu.getReal(refs))
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
-    data = np.array(rows)
+    n = int(round(stop / step))
+    data = fmi_harness.run_cs(unzipdir, SIGNALS, n_steps=n, step=step, start={**params.as_dict(), **(start or {}), "V": V})
     return {"t": np.arange(n + 1) * step, **{s: data[:, i] for i, s in enumerate(SIGNALS)}}
 
 

@@ -6,11 +6,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import fmi_harness
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
-from fmpy.validation import validate_fmu
+from fmi_harness import VARARGS_AS_FIXED, Slave, capturing_callbacks
 
 from pendulab.model.seesaw import STATES, SeesawModel, SeesawParameters
 
@@ -24,28 +23,7 @@ def voltage(n: int) -> np.ndarray:
 
 
 def run_fmu(path: Path, V: np.ndarray, start: dict[str, float]) -> np.ndarray:
-    unzipdir = extract(str(path))
-    md = read_model_description(unzipdir)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, modelIdentifier="Seesaw", unzipDirectory=unzipdir, instanceName="seesaw")
-    fmu.instantiate()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.setReal([vr[k] for k in start], list(start.values()))
-    fmu.exitInitializationMode()
-    refs = [vr[s] for s in OUTPUTS]
-    rows = [fmu.getReal(refs)]
-    for k, v in enumerate(V):
-        fmu.setReal([vr["V"]], [float(v)])
-        fmu.doStep(k * 1e-3, 1e-3)
-        rows.append(fmu.getReal(refs))
-    fmu.terminate()
-    fmu.freeInstance()
-    return np.array(rows)
-
-
-def test_seesaw_fmu_validates(seesaw_fmu: Path) -> None:
-    assert validate_fmu(str(seesaw_fmu)) == []
+    return fmi_harness.run_cs(path, OUTPUTS, {"V": V}, start=start)
 
 
 def test_co_simulation_equals_the_casadi_model(seesaw_fmu: Path) -> None:
@@ -66,20 +44,9 @@ def test_co_simulation_equals_the_casadi_model(seesaw_fmu: Path) -> None:
 
 
 def test_ecos_runs_the_seesaw_as_fmpy_does(seesaw_fmu: Path) -> None:
-    ecospy = pytest.importorskip("ecospy")
-    n = 800
-    V = voltage(n)
-    with ecospy.EcosSimulationStructure() as structure:
-        structure.add_model("seesaw", str(seesaw_fmu))
-        structure.add_parameter_set("initial", {"seesaw::theta": 0.01})
-        with ecospy.EcosSimulation(structure=structure, step_size=1e-3) as sim:
-            assert sim.init(parameter_set="initial")
-            rows = [[sim.get_real(f"seesaw::{s}") for s in OUTPUTS]]
-            for v in V:
-                sim.set_real("seesaw::V", float(v))
-                sim.step()
-                rows.append([sim.get_real(f"seesaw::{s}") for s in OUTPUTS])
-            sim.terminate()
+    pytest.importorskip("ecospy")
+    V = voltage(800)
+    rows = fmi_harness.ecos_run(seesaw_fmu, OUTPUTS, V, {"theta": 0.01})
     np.testing.assert_allclose(np.array(rows), run_fmu(seesaw_fmu, V, {"theta": 0.01}), rtol=1e-9, atol=1e-12)
 
 
@@ -88,24 +55,16 @@ def test_ecos_runs_the_seesaw_as_fmpy_does(seesaw_fmu: Path) -> None:
                                           ({"xdot": math.nan}, "not finite")])
 def test_a_start_beyond_the_stops_or_a_bad_parameter_is_refused_with_a_log_line(seesaw_fmu: Path, start: dict[str, float], words: str) -> None:
     from fmpy.fmi1 import FMICallException
-    from test_plant_fmu import _VARARGS_AS_FIXED, _capturing_callbacks  # the plant's tests' logger capture
 
-    unzipdir = extract(str(seesaw_fmu))
-    md = read_model_description(unzipdir)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
     messages: list[str] = []
-    fmu = FMU2Slave(guid=md.guid, modelIdentifier="Seesaw", unzipDirectory=unzipdir, instanceName="seesaw")
-    fmu.instantiate(callbacks=_capturing_callbacks(messages))
-    try:
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
+    with Slave(seesaw_fmu, callbacks=capturing_callbacks(messages), initialize=False) as seesaw:
+        seesaw.fmu.setupExperiment(startTime=0.0)
+        seesaw.fmu.enterInitializationMode()
         with pytest.raises(FMICallException):  # a value outside its range is refused when set, the rest on leaving
-            fmu.setReal([vr[k] for k in start], list(start.values()))
-            fmu.exitInitializationMode()
-        if _VARARGS_AS_FIXED:
+            seesaw.set(start)
+            seesaw.fmu.exitInitializationMode()
+        if VARARGS_AS_FIXED:
             assert any(words in m for m in messages), messages
-    finally:
-        fmu.freeInstance()
 
 
 def test_the_fmi3_seesaw_equals_the_fmi2_one() -> None:

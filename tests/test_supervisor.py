@@ -10,13 +10,12 @@ from __future__ import annotations
 import itertools
 import math
 from ctypes import byref
-from pathlib import Path
 
 import pytest
+from fmi_harness import Slave
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException, printLogMessage
-from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-from fmpy.validation import validate_fmu
+from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
 from pendulab.fmu.models.supervisor.config import (
     ALPHA_MAX_DEFAULT,
@@ -84,13 +83,6 @@ def callbacks():
 
 # ---------------------------------------------------------------- the FMU
 @pytest.fixture(scope="module")
-def supervisor_fmu() -> Path:
-    from pendulab.fmu.build import ensure_fmu
-
-    return ensure_fmu("Supervisor")
-
-
-@pytest.fixture(scope="module")
 def unpacked(supervisor_fmu, tmp_path_factory):
     unzipdir = extract(str(supervisor_fmu), unzipdir=str(tmp_path_factory.mktemp("Supervisor")))
     return read_model_description(str(supervisor_fmu)), unzipdir
@@ -109,32 +101,16 @@ class Supervisor:
         self.variables = {v.name: v for v in md.modelVariables}
         self.name = Supervisor.last_name = f"{_PREFIX}{next(_names)}"
         MESSAGES[self.name] = []
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=self.name)
-        self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        self.slave = Slave(unzipdir, parameters, name=self.name, callbacks=callbacks, logging=True, description=md)
+        self.fmu = self.slave.fmu
         self.t = 0.0
-        self.fmu.setupExperiment(startTime=0.0)
-        self.fmu.enterInitializationMode()
-        self.set(**parameters)
-        try:
-            self.fmu.exitInitializationMode()
-        except FMICallException:
-            self.close()
-            raise
 
     def set(self, **values):
-        for name, value in values.items():
-            v = self.variables[name]
-            setter = {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger, "Boolean": self.fmu.setBoolean}[v.type]
-            setter([v.valueReference], [value])
+        self.slave.set(values)
 
     def get(self, *names):
-        out = {}
-        for name in names or [n for n, v in self.variables.items() if v.causality == "output"]:
-            v = self.variables[name]
-            getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger, "Boolean": self.fmu.getBoolean}[v.type]
-            out[name] = getter([v.valueReference])[0]
-        return out
+        names = names or [n for n, v in self.variables.items() if v.causality == "output"]
+        return dict(zip(names, self.slave.get(names)))
 
     def tick(self, command: str | None = None, **inputs):
         """One communication step: inputs at t, outputs at t, doStep.
@@ -173,10 +149,6 @@ def make(unpacked, callbacks):
 
 
 # ---------------------------------------------------------------- model description
-def test_fmpy_validate_reports_no_problem(supervisor_fmu):
-    assert validate_fmu(str(supervisor_fmu)) == []
-
-
 def test_every_variable_is_described_and_physical_reals_have_units(unpacked):
     md, _ = unpacked
     assert md.coSimulation is not None and md.modelExchange is None
