@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmi_harness import hanging_plant_run
 from fmpy import read_model_description
 
 from pendulab.fmu.build import FMI_HEADERS, WIN64_COMPILER
@@ -49,7 +50,13 @@ def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supe
         assert imports == {"kernel32.dll", "msvcrt.dll"}, (fmu.name, imports)
 
 
-def _run_host(source: Path, windows: bool, folder: Path, arguments: list[str]) -> list[np.ndarray]:
+@pytest.fixture(scope="module")
+def wineprefix(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One Wine prefix for the module's hosts: Wine sets it up on its first run (seconds of CPU); the others reuse it."""
+    return tmp_path_factory.mktemp("wine") / "prefix"
+
+
+def _run_host(source: Path, windows: bool, folder: Path, arguments: list[str], wineprefix: Path) -> list[np.ndarray]:
     """Compile the C host ``source`` for linux64 (cc) or win64 (mingw-w64) and run it, the win64 one under Wine,
     with ``arguments`` (its binaries must already be in ``folder``): the numbers of its last two lines."""
     exe = folder / (source.stem + (".exe" if windows else ""))
@@ -57,7 +64,7 @@ def _run_host(source: Path, windows: bool, folder: Path, arguments: list[str]) -
     subprocess.run([compiler, "-std=c99", "-O1", f"-I{FMI_HEADERS}", str(source), "-o", str(exe), *libs],
                    check=True, capture_output=True)
     command = [WINE, str(exe)] if windows else [str(exe)]
-    env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(folder.parent / "wineprefix")}
+    env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(wineprefix)}
     run = subprocess.run(command + arguments, capture_output=True, text=True, timeout=300, env=env)
     assert run.returncode == 0, (exe.name, run.stdout, run.stderr)
     lines = [line for line in run.stdout.splitlines() if line.strip()]
@@ -78,14 +85,14 @@ def _arguments(fmus: tuple[Path, Path, Path], folder: Path, platform_dir: str) -
 
 
 @pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
-def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, supervisor_fmu, tmp_path):
+def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, supervisor_fmu, tmp_path, wineprefix):
     """The plant's open-loop case and the loop of the three FMUs: Wine's results equal linux64's to 1e-12."""
     results = {}
     for platform_dir in ("linux64", "win64"):
         folder = tmp_path / platform_dir
         folder.mkdir()
         arguments = _arguments((plant_fmu, controller_fmu, supervisor_fmu), folder, platform_dir)
-        results[platform_dir] = _run_host(HOST, platform_dir == "win64", folder, arguments)
+        results[platform_dir] = _run_host(HOST, platform_dir == "win64", folder, arguments, wineprefix)
     for linux, windows in zip(results["linux64"], results["win64"]):
         assert np.all(np.isfinite(linux)) and np.any(linux != 0)
         print("\nlinux64", linux, "\nwin64  ", windows, "\nmax |difference|", np.max(np.abs(windows - linux)))
@@ -95,32 +102,8 @@ def test_win64_binaries_under_wine_equal_linux64(plant_fmu, controller_fmu, supe
 HOST3 = Path(__file__).parent / "hosts" / "fmi3_host.c"
 
 
-def _fmi2_open_loop(plant_fmu: Path, folder: Path, steps: int) -> np.ndarray:
-    """fmu_host.c's open-loop case on the FMI 2.0 plant's linux64 binary, through fmpy."""
-    import math
-
-    from fmpy import extract
-    from fmpy.fmi2 import FMU2Slave
-
-    md = read_model_description(str(plant_fmu))
-    refs = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(plant_fmu), str(folder)), modelIdentifier="Plant")
-    fmu.instantiate()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.setReal([refs["alpha"]], [math.pi + 0.3])
-    fmu.exitInitializationMode()
-    for k in range(steps):
-        fmu.setReal([refs["V"]], [12.0 * math.sin(2 * math.pi * k * 1e-3)])
-        fmu.doStep(k * 1e-3, 1e-3)
-    states = np.array(fmu.getReal([refs[n] for n in ("x", "xdot", "alpha", "alphadot")]))
-    fmu.terminate()
-    fmu.freeInstance()
-    return states
-
-
 @pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
-def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_fmu, tmp_path):
+def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_fmu, tmp_path, wineprefix):
     """Plant3's x86_64-windows DLL under Wine (tests/hosts/fmi3_host.c: Co-Simulation open loop, Model Exchange
     with state and time events) equals its x86_64-linux binary to 1e-12, and the Co-Simulation case equals
     the FMI 2.0 plant's."""
@@ -134,7 +117,7 @@ def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_f
         binary = folder / f"Plant3{SUFFIX3[platform_dir]}"
         binary.write_bytes(zipfile.ZipFile(plant3_fmu).read(f"binaries/{platform_dir}/{binary.name}"))
         arguments = [str(binary), md.guid, str(steps), *(str(refs[n]) for n in ("V", "x", "xdot", "alpha", "alphadot"))]
-        results[platform_dir] = _run_host(HOST3, platform_dir == "x86_64-windows", folder, arguments)
+        results[platform_dir] = _run_host(HOST3, platform_dir == "x86_64-windows", folder, arguments, wineprefix)
     linux, windows = results["x86_64-linux"], results["x86_64-windows"]
     state_events, time_events = linux[1][4:]
     assert state_events > 0 and time_events == 2, "Model Exchange met friction switches and the poke's two edges"
@@ -142,7 +125,7 @@ def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_f
         print("\nx86_64-linux  ", a, "\nx86_64-windows", b, "\nmax |difference|", np.max(np.abs(a - b)))
         assert np.all(np.isfinite(a)) and np.any(a[:4] != 0)
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
-    fmi2 = _fmi2_open_loop(plant_fmu, tmp_path / "fmi2", steps)
+    fmi2 = hanging_plant_run(plant_fmu, steps)[-1]  # fmi3_host.c's open-loop case on the FMI 2.0 plant, through fmpy
     print("FMI 2.0 plant, same case:", fmi2, "max |difference|", np.max(np.abs(fmi2 - linux[0])))
     np.testing.assert_allclose(linux[0], fmi2, rtol=0, atol=1e-12)
 
@@ -187,7 +170,7 @@ def plan_runner_binary(folder: Path, windows: bool) -> Path:
 
 
 @pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
-def test_plan_runner_dll_runs_under_wine_like_linux64(tmp_path):
+def test_plan_runner_dll_runs_under_wine_like_linux64(tmp_path, wineprefix):
     """The win64 step-plan runner a wheel carries: loads in a C host under Wine, runs a plan (reads, a connection,
     writes, the barrier, steps) and stops at a failing step exactly as the linux64 one does; imports only
     KERNEL32 and msvcrt."""
@@ -196,7 +179,7 @@ def test_plan_runner_dll_runs_under_wine_like_linux64(tmp_path):
         folder = tmp_path / platform_dir
         folder.mkdir()
         library = plan_runner_binary(folder, platform_dir == "win64")
-        results[platform_dir] = _run_host(PLAN_HOST, platform_dir == "win64", folder, [str(library)])
+        results[platform_dir] = _run_host(PLAN_HOST, platform_dir == "win64", folder, [str(library)], wineprefix)
     dump = subprocess.run(["x86_64-w64-mingw32-objdump", "-p", str(library)], capture_output=True, text=True, check=True).stdout
     assert {line.split(":")[1].strip().lower() for line in dump.splitlines() if "DLL Name:" in line} == {"kernel32.dll", "msvcrt.dll"}
     for linux, windows, reference in zip(results["linux64"], results["win64"], _plan_reference()):
