@@ -393,3 +393,44 @@ def test_fresh_form_lead_verdict_form_words_and_reload(gui):
     wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, f'#metrics td[data-run="{run_id}"]'), 20)
     assert page_metrics(d, run_id)["verdict"][1]["headline"] == headline
     shot(gui, "12-after-reload")
+
+
+def test_the_seesaw_chosen_its_controller_entry_run_and_drawing(gui):
+    """Issue 20: choosing the seesaw turns the controller entry into the state feedback's (K shown as
+    'pendulab lqr' prints it), the poke into the tap, and a run draws the tilt, the seesaw's verdict in
+    green, its metrics in degrees and the seesaw animated."""
+    d = gui["driver"]
+    d.switch_to.new_window("tab")
+    d.get(gui["url"])
+    wait(d, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-drawn") == "1", 10)
+    d.find_element(By.ID, "plant-seesaw").click()
+    assert not d.find_element(By.ID, "k-zeros").is_displayed() and not d.find_element(By.ID, "pendulum").is_displayed()
+    assert d.find_element(By.ID, "sf-q").get_attribute("value") == "1000,5000,0,0,2000"
+    assert [d.find_element(By.ID, i).get_attribute("value") for i in ("poke-mag", "poke-dur")] == ["3.3", "0.1"]
+    assert not d.find_element(By.ID, "recentre").is_displayed()
+    wait(d, lambda d: "K_theta = -224.349" in status(d, "controller-status")[1], 20)  # the Guide: -224.3485
+    wait(d, lambda d: "closed loop stable" in d.find_element(By.ID, "linear-verdict").text, 20)
+    type_into(d, "sf-r", "-1")  # a wrong weight: the command line's rule in the form's words
+    wait(d, lambda d: status(d, "controller-status")[1].startswith("R must be a finite number > 0"), 10)
+    d.find_element(By.ID, "sf-demo").click()
+    wait(d, lambda d: "ok" in status(d, "controller-status")[0], 10)
+    type_into(d, "stop-time", "4")
+
+    folder = run_and_wait(d)
+    metrics = json.loads((folder / "metrics.json").read_text())
+    cls, text = status(d, "run-status")
+    assert metrics["verdict"]["plant"] == "seesaw" and text.startswith(metrics["verdict"]["headline"])
+    assert text.startswith("HELD LEVEL for 4 s") and "ok" in cls.split()  # green: held level, no warning
+    run_id = current_run_id(d)
+    layout = d.execute_script("const l = document.getElementById('response').layout; return [l.yaxis.title.text, l.yaxis3.title.text, !!l.yaxis4]")
+    assert layout == ["tilt (°)", "voltage (V)", False]
+    tilt = d.execute_script("return document.getElementById('response').data[0].y")
+    run = scipy.io.loadmat(folder / "run.mat")
+    assert max(map(abs, tilt)) == pytest.approx(np.degrees(np.abs(run["theta"]).max()), rel=1e-9)
+    shown = page_metrics(d, run_id)
+    assert shown["peak_tilt_rad"][1] == metrics["peak_tilt_rad"]
+    assert math.isclose(float(shown["peak_tilt_rad"][0]), math.degrees(metrics["peak_tilt_rad"]), rel_tol=6e-4)
+    assert float(shown["tilt_settling_time_s"][0]) == pytest.approx(metrics["tilt_settling_time_s"], rel=6e-4)
+    d.find_element(By.ID, "play").click()
+    wait(d, lambda d: ", tilt " in d.find_element(By.ID, "anim-time").text, 5)
+    shot(gui, "13-seesaw-run")

@@ -307,3 +307,63 @@ def test_the_supervisor_mode_switches_reach_the_run(tmp_path):
     assert metrics["swing_start_s"] == 0.0 and 0 < metrics["catch_time_s"] < 8
     meta = scipy.io.loadmat(tmp_path / "run" / "run.mat", squeeze_me=True, struct_as_record=False)["meta"]
     assert meta.recentre and meta.swing_up and meta.start == "hanging"
+
+
+def test_the_seesaw_s_controller_entry_linear_view_and_run(tmp_path, capsys):
+    """Issue 20: the page's seesaw. Q and R give Quanser's K (the SEESAW Laboratory Guide's); a file that
+    'pendulab lqr --out' wrote gives the K and poles 'lqr --json' prints; wrong files and weights get one
+    line in the form's words; a run is the seesaw's, drawn from its own columns."""
+    import queue
+
+    import numpy as np
+
+    from pendulab.gui.app import linear_view, run_data
+    from pendulab.gui.worker import run_simulation
+
+    lqr = {"plant": "seesaw", "mode": "lqr", "q": "1000,5000,0,0,2000", "r": "0.5", "integral": True}
+    answer = check_controller(lqr)
+    assert answer["states"] == ["x", "theta", "xdot", "thetadot", "theta_integral"]
+    np.testing.assert_allclose(answer["K"], [180.797, -224.3485, 16.6684, -66.9969, -63.2456], rtol=2e-5)  # the Guide's K
+
+    def poles(pairs):
+        return np.sort_complex(np.array([complex(re, im) for re, im in pairs]))
+
+    path = tmp_path / "k.toml"
+    assert main(["lqr", "--plant", "seesaw", "--q", "500,5000,0,0,1000", "--r", "1", "--json", "--out", str(path)]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    from_file = check_controller({"plant": "seesaw", "mode": "file", "file": {"name": "k.toml", "text": path.read_text()}})
+    assert from_file["K"] == printed["K"]
+    np.testing.assert_allclose(poles(from_file["closed_loop_poles"]), poles(printed["closed_loop_poles"]), rtol=1e-9)
+
+    assert main(["lqr", "--plant", "pendulum", "--out", str(tmp_path / "p.toml")]) == 0
+    capsys.readouterr()
+    wrong = [
+        ({"mode": "file", "file": {"name": "p.toml", "text": (tmp_path / "p.toml").read_text()}}, "is a state feedback for the pendulum"),
+        ({"mode": "file", "file": {"name": "g.toml", "text": "[kernel]\nzeros = [-6]\npoles = [6.4]\ngain = 45000\n"}},
+         "no [state_feedback] table"),
+        ({"mode": "file", "file": {"name": "", "text": ""}}, "choose the controller file"),
+        ({"q": "1000,5000,0,0"}, "Q has 4 weights but the state has 5"),
+        ({"r": "-0.5"}, "R must be a finite number > 0"),
+    ]
+    for change, words in wrong:
+        error = check_controller({**lqr, **change})["error"]
+        assert words in error and "--q" not in error and "--r" not in error and "\n" not in error, error
+
+    view = linear_view({"plant": "seesaw", "controller": lqr}, None)
+    got = np.sort_complex(np.array(view["closed_poles"]["re"]) + 1j * np.array(view["closed_poles"]["im"]))
+    np.testing.assert_allclose(got, poles(answer["closed_loop_poles"]), rtol=1e-9)
+    assert view["stable"] and view["unstable_open_loop_poles"] == 1
+
+    # The pendulum's fields (hidden on the page) do not reach a seesaw run.
+    form = {"plant": "seesaw", "controller": lqr, "poke": {"magnitude": "3.3", "duration": "0.1", "start": "0.5"},
+            "stop_time": "2.5", "pendulum": "short", "recentre": True}
+    spec = run_spec(form, None)
+    assert spec.plant.kind == "seesaw" and spec.supervisor_parameters() == {} and spec.controller.state_feedback.K == tuple(answer["K"])
+    with pytest.raises(UserError, match="^tap magnitude is 0: a tap of size 0"):
+        run_spec({**form, "poke": {"magnitude": "0", "duration": "0.1", "start": "0.5"}}, None)
+    q = queue.Queue()
+    run_simulation(spec, {}, str(tmp_path / "run"), q)
+    assert [q.get_nowait() for _ in range(q.qsize())][-1] == ("done", None)
+    data = run_data(tmp_path / "run")
+    assert data["plant"] == "seesaw" and set(data["columns"]) == {"t", "theta", "x", "voltage"} and data["poke_start"] == 0.5
+    assert data["metrics"]["verdict"]["plant"] == "seesaw" and data["metrics"]["verdict"]["headline"].startswith("HELD LEVEL for 2.5 s")

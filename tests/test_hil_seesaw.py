@@ -73,6 +73,9 @@ def test_lab_holds_the_emulated_seesaw_level(seesaw_run):
     metrics = json.loads((out / "metrics.json").read_text())
     tap = metrics["poke_start_detected_s"]
     assert tap is not None and 0.95 < tap - metrics["hand_release_s"] < 1.2
+    # The lab judges the session as a seesaw (the verdict's words and numbers, as simulate's).
+    assert metrics["verdict"]["plant"] == "seesaw" and metrics["verdict"]["headline"].startswith("HELD LEVEL for ")
+    assert metrics["tilt_settling_time_s"] is not None and metrics["tilt_settling_time_s"] < 3.0
     after = tilt[log["t"] > tap + 3.0].max()
     print(f"seesaw on the emulator: peak tilt {tilt.max():.2f} deg, within {after:.2f} deg from 3 s after the tap, "
           f"largest |x| {np.abs(log['x']).max():.3f} m")

@@ -9,8 +9,8 @@ root-locus command writes its PNG; ``tf --calibration`` says that friction is no
 The files the commands name are made from the README itself (``my_controller.toml`` is its TOML block)
 or stand in for a TA's (``calibration/fitted.json`` holds the lab's friction, ``old_lab/defaultData.mat``
 the old lab's ``[1.5 0.005 20 0]``). ``lab``, ``calibrate``, ``fit`` and ``rig-emulator`` have their own tests,
-and so have the seesaw's commands (``--plant seesaw``: no verdict of its own yet, tests/test_seesaw_cli.py) and
-``--robust`` (a sweep of 200 runs, tests/test_sweep*.py).
+and so have the seesaw's commands (``--plant seesaw``, tests/test_seesaw_*.py) except a ``simulate`` that states
+its verdict (``# HELD LEVEL ...``), and ``--robust`` (a sweep of 200 runs, tests/test_sweep*.py).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from pendulab.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
-OUTCOMES = ("BALANCED", "FELL", "CUT")
+OUTCOMES = ("BALANCED", "HELD", "FELL", "CUT")
 
 
 def readme_commands() -> list[tuple[str, str]]:
@@ -37,8 +37,10 @@ def readme_commands() -> list[tuple[str, str]]:
     for block in re.findall(r"```bash\n(.*?)```", README, flags=re.S):
         for line in block.splitlines():
             match = re.search(r"(pendulab (?:simulate|tf)\b[^#]*?)\s*(?:#\s*(.*))?$", line)
-            if match and "--plant seesaw" not in line and "--robust" not in line:
-                command = (match.group(1).strip(), (match.group(2) or "").strip())
+            comment = (match.group(2) or "").strip() if match else ""
+            seesaw_verdict = "--plant seesaw" not in line or comment.split(" ")[0] in OUTCOMES
+            if match and seesaw_verdict and "--robust" not in line:
+                command = (match.group(1).strip(), comment)
                 if command not in found:  # the same command shown twice runs once
                     found.append(command)
     return found
@@ -81,6 +83,8 @@ def test_readme_command_prints_what_it_states(command, stated, readme_folder, ca
         if stated.startswith("BALANCED"):
             expected = stated.split(" (")[0].split(";")[0]
             assert first == expected, (command, out)
+        elif stated.startswith("HELD"):  # the seesaw's verdict, stated whole
+            assert first == stated, (command, out)
         else:
             assert first.startswith(word), (command, out)
     elif stated.startswith("alpha/V ="):

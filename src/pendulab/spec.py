@@ -244,11 +244,12 @@ class Poke:
         if not all(math.isfinite(v) for v in values) or self.duration < 0 or self.start < 0:
             raise UserError(f"--poke {','.join(f'{v:g}' for v in values)}: the magnitude must be finite and the duration and start >= 0")
 
-    def check_disturbs(self, magnitude: str = "--poke magnitude", duration: str = "--poke duration") -> None:
+    def check_disturbs(self, magnitude: str = "--poke magnitude", duration: str = "--poke duration", what: str = "poke") -> None:
         """Refuse a poke that disturbs nothing (size or length 0): any controller "stays up" then (UserError).
 
-        ``simulate`` and the GUI call it (``magnitude`` and ``duration`` name their fields in the message);
-        a spec with such a poke still runs in Python, and its verdict is ``not tested``.
+        ``simulate`` and the GUI call it (``magnitude`` and ``duration`` name their fields in the message,
+        ``what`` is "poke" or the seesaw's "tap"); a spec with such a poke still runs in Python, and its
+        verdict is ``not tested``.
 
         Examples
         --------
@@ -257,12 +258,20 @@ class Poke:
         ...
         pendulab.errors.UserError: --poke magnitude is 0: a poke of size 0 disturbs nothing, so any controller would stay up and the run would test nothing; give a magnitude such as 50 rad/s^2 (the default) or 220 (the lab's)
         """
+        size, length = _TYPICAL_DISTURBANCE[what]
         if self.magnitude == 0:
-            raise UserError(f"{magnitude} is 0: a poke of size 0 disturbs nothing, so any controller would stay up and the run "
-                            "would test nothing; give a magnitude such as 50 rad/s^2 (the default) or 220 (the lab's)")
+            raise UserError(f"{magnitude} is 0: a {what} of size 0 disturbs nothing, so any controller would stay up and the run "
+                            f"would test nothing; give a magnitude such as {size}")
         if self.duration == 0:
-            raise UserError(f"{duration} is 0 s: a poke of length 0 disturbs nothing, so the run would test nothing; "
-                            "give a duration such as 0.005 s (the default)")
+            raise UserError(f"{duration} is 0 s: a {what} of length 0 disturbs nothing, so the run would test nothing; "
+                            f"give a duration such as {length}")
+
+
+#: Typical sizes and lengths of the pendulum's poke and the seesaw's tap (for the messages that refuse a 0).
+_TYPICAL_DISTURBANCE = {
+    "poke": ("50 rad/s^2 (the default) or 220 (the lab's)", "0.005 s (the default)"),
+    "tap": ("3.3 rad/s^2 (the default: about 5 degrees of tilt)", "0.1 s (the default)"),
+}
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ Examples
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -37,13 +37,18 @@ PANELS = (("alpha", "angle (rad)"), ("tip", "tip (m)"), ("x", "cart (m)"), ("vol
 
 @dataclass
 class ComparedRun:
-    """One run: its columns, where its poke starts, its metrics and a label."""
+    """One run: its columns, where its poke (the seesaw's tap) starts, its metrics, a label, its angle column."""
 
     label: str
     columns: dict[str, np.ndarray]
     poke_start: float
     metrics: dict[str, Any]
     source: str
+    angle: str = "alpha"  # "theta": a seesaw run
+
+    @property
+    def seesaw(self) -> bool:
+        return self.angle == "theta"
 
     def aligned(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(t - poke_start, column)``."""
@@ -55,7 +60,12 @@ def _is_old_lab_folder(path: Path) -> bool:
 
 
 def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float = 2 * np.pi / 4096) -> ComparedRun:
-    """A run folder (``pendulab simulate``/``lab``), a run file, or a folder of the old lab's logs."""
+    """A run folder (``pendulab simulate``/``lab``), a run file, or a folder of the old lab's logs.
+
+    A seesaw run is aligned at its tap (the parameters' ``tap_start``, or the rig's detected one) and measured by
+    its tilt (``q_alpha`` is then the tilt encoder's step unless the run's parameters say another).
+    """
+    from pendulab.analysis.results import is_seesaw_run
     from pendulab.analysis.verdict import Limits, assess, was_cut_before_poke
 
     path = Path(path)
@@ -86,7 +96,14 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
             except (OSError, ValueError) as exc:
                 raise UserError(f"cannot read {folder / 'metrics.json'}: {exc}; rewrite it or remove it") from None
         source = str(meta.get("source", "simulation"))
-    for name in ("t", "alpha", "x"):
+    angle = "theta" if is_seesaw_run(columns) else "alpha"
+    params = meta.get("parameters") if isinstance(meta.get("parameters"), Mapping) else None
+    if angle == "theta":
+        from pendulab.model.seesaw import SEESAW_COUNT
+
+        q_alpha = float(np.ravel(params["q_theta"])[0]) if params and "q_theta" in params else SEESAW_COUNT
+        q_alpha = q_alpha or SEESAW_COUNT  # (a run without quantization: the encoder's step for finding the tap)
+    for name in ("t", angle, "x"):
         bad = np.flatnonzero(~np.isfinite(np.asarray(columns[name], dtype=float)))
         if bad.size:
             # Said as it is: an aligned comparison of such a run would report "no poke found".
@@ -94,22 +111,27 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
             raise UserError(f"run {path}: {name} is not a number (NaN or inf) from {where} on ({bad.size} samples); "
                             "the file is damaged or was written by a failed run: compare an intact run")
     poke = None
-    params = meta.get("parameters") if isinstance(meta.get("parameters"), Mapping) else None
-    if source != "rig" and params and "poke_start" in params and source != "old lab":
-        poke = float(np.ravel(params["poke_start"])[0])
+    start = "tap_start" if angle == "theta" else "poke_start"
+    if source != "rig" and params and start in params and source != "old lab":
+        poke = float(np.ravel(params[start])[0])
     if was_cut_before_poke(metrics):
         raise UserError(f"run {path} was cut before the poke ({metrics['verdict']['headline']}); a comparison aligns runs at their poke")
     if poke is None and metrics.get("poke_start_detected_s") is not None:
         poke = float(metrics["poke_start_detected_s"])
     if poke is None:
-        poke = detect_poke(columns["t"], columns["alpha"], q_alpha=q_alpha)
+        poke = detect_poke(columns["t"], columns[angle], q_alpha=q_alpha)
     if poke is None:
-        raise UserError(f"no poke found in the angle of {path}; a comparison aligns runs at their poke")
+        what = "tap in the tilt" if angle == "theta" else "poke in the angle"
+        raise UserError(f"no {what} of {path}; a comparison aligns runs at their {what.split()[0]}")
+    if not metrics and angle == "theta":  # a seesaw run without metrics.json: judged as a seesaw, with its tilt's step
+        from pendulab.cosim.seesaw import verdict_limits
+
+        metrics, _ = assess(columns, poke_start=poke, limits=replace(verdict_limits(), q_alpha=q_alpha), plant="seesaw")
     if not metrics:  # a run without metrics.json (the old lab's logs): measured and judged as any run
         metrics, _ = assess(columns, poke_start=poke, limits=Limits(q_alpha=q_alpha))
     name = path.name if path.is_dir() else f"{path.parent.name}/{path.name}"
     label = name if name == source else f"{name} ({source})"
-    return ComparedRun(label, columns, poke, metrics, source)
+    return ComparedRun(label, columns, poke, metrics, source, angle)
 
 
 def nrmse(run: ComparedRun, reference: ComparedRun, name: str = "alpha", *, window: float = 1.0) -> float:

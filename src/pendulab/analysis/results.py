@@ -46,6 +46,24 @@ from pendulab.outputs import write_temporary as _write_temporary
 COLUMNS = ("t", "x", "xdot", "alpha", "alpha_measured", "tip", "voltage_command", "voltage", "supervisor_state")
 #: The seesaw's run columns (its runs have the tilt ``theta`` where the pendulum's have ``alpha``; no tip).
 SEESAW_COLUMNS = ("t", "x", "xdot", "theta", "theta_measured", "x_measured", "voltage_command", "voltage", "supervisor_state")
+
+
+def is_seesaw_run(columns: Mapping[str, Any]) -> bool:
+    """Whether run columns are the seesaw's (its tilt ``theta`` where the pendulum's runs have ``alpha``).
+
+    Examples
+    --------
+    >>> is_seesaw_run(dict.fromkeys(SEESAW_COLUMNS)), is_seesaw_run(dict.fromkeys(COLUMNS))
+    (True, False)
+    """
+    return "theta" in columns and "alpha" not in columns
+
+
+def run_columns(columns: Mapping[str, Any]) -> tuple[str, ...]:
+    """The columns every run of that plant has: :data:`SEESAW_COLUMNS` for a seesaw run, else :data:`COLUMNS`."""
+    return SEESAW_COLUMNS if is_seesaw_run(columns) else COLUMNS
+
+
 #: The fields the ``meta`` struct always has (empty when not given).
 META_FIELDS = ("controller", "parameters", "calibration", "pendulum", "version")
 FILE_NAMES = {"mat": "run.mat", "csv": "run.csv", "metrics": "metrics.json"}
@@ -167,7 +185,7 @@ def column_table(columns: Mapping[str, Any]) -> tuple[list[str], np.ndarray]:
     >>> names[0], names[-1], data.shape
     ('t', 'extra', (3, 10))
     """
-    required = SEESAW_COLUMNS if "theta" in columns and "alpha" not in columns else COLUMNS
+    required = run_columns(columns)
     missing = [name for name in required if name not in columns]
     if missing:
         raise ValueError(f"run columns lack {', '.join(missing)}; every run has {', '.join(required)}")
@@ -468,7 +486,7 @@ def read_run(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
     Returns
     -------
     columns : dict of name -> 1-D float array
-        Every column in the file (at least :data:`COLUMNS`).
+        Every column in the file (at least :data:`COLUMNS`, or a seesaw run's :data:`SEESAW_COLUMNS`).
     meta : dict
         The ``meta`` struct as nested dicts (``{}`` for a CSV file, which has no meta).
 
@@ -493,9 +511,11 @@ def read_run(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
         columns, meta = _read_csv(path), {}
     else:
         raise UserError(f"{path} is neither a .mat nor a .csv file; give a run.mat or run.csv")
-    missing = [name for name in COLUMNS if name not in columns]
+    required = run_columns(columns)
+    missing = [name for name in required if name not in columns]
     if missing:
-        raise UserError(f"{path} lacks column(s) {', '.join(missing)}; a pendulab run has {', '.join(COLUMNS)}")
+        what = "a seesaw run" if required is SEESAW_COLUMNS else "a pendulab run"
+        raise UserError(f"{path} lacks column(s) {', '.join(missing)}; {what} has {', '.join(required)}")
     return columns, meta
 
 

@@ -57,6 +57,27 @@ supervisor's ``alpha_max`` and ``x_max``), so it moves with them:
 
 ``bench/verdict.py`` checks these choices against the outcome of 20 s runs (the issue's Must show 3).
 
+The seesaw
+----------
+A seesaw run (``plant="seesaw"``: the tilt ``theta`` where the pendulum has ``alpha``, the tap as its
+poke) is judged by the same rules with the seesaw's limits (the supervisor's tilt limit, 10°, and cart
+limit, 0.35 m; :data:`pendulab.cosim.seesaw.SUPERVISOR_LIMITS`) and told in its own words:
+
+* ``balanced`` is **held level**: the tilt came back within :data:`TILT_BAND` (2°) of level after the
+  tap and stayed there for the last :data:`TILT_HOLD` s of the run (Quanser's lab asks for 2° within
+  3 s of a 5° tap); a seesaw held up but still beyond 2° gets the warning ``unsettled``;
+* ``fell``: the tilt passed the supervisor's limit (the motor is cut, and the seesaw then comes to rest
+  on its tilt stop, 11.5°: the headline says when it hit it) or reached the tilt stop itself;
+* ``cut``: the cart reached the track limit with the seesaw still up.
+
+Its measures (in ``metrics.json`` too): the tap's peak tilt and when it came, the time the tilt took to
+settle within 2°, the largest tilt over the last second (:data:`RESIDUAL_WINDOW`) and the cart's
+largest excursion; the friction and quantization limit cycle is the SPEC's
+``limit_cycle_amplitude_rad`` of the tilt (it appears once the tilt has converged: a 20 s run).
+The small-margin warning reads the tilt against :data:`TILT_MARGIN` (3/4) of its limit instead of half:
+Quanser's lab prescribes the tap (about 5°), so it varies less than a free poke of the pendulum, and
+a response beyond 3/4 of the limit is cut by a tap a third harder.
+
 Examples
 --------
 >>> import numpy as np
@@ -95,8 +116,21 @@ TRACK_MARGIN = 0.75
 #: Without a supervisor an angle beyond this (rad) means the pendulum fell.
 FALLEN_ANGLE = math.pi / 2
 
+#: The plants a verdict knows (their words differ; the rules are the same).
+PLANTS = ("pendulum", "seesaw")
+#: The seesaw is held level when its tilt comes back within this of level (rad): Quanser's 2°.
+TILT_BAND = math.radians(2.0)
+#: ... and stays inside the band for at least this long before the end of the run (s): longer than
+#: a swing through the band takes (the demo's closed loop swings at about 2.5 rad/s: a 3° swing
+#: crosses the 2° band in 0.6 s).
+TILT_HOLD = 1.0
+#: The seesaw's small margin: the largest tilt beyond this fraction of the tilt limit.
+TILT_MARGIN = 0.75
+#: Window at the end of a seesaw run over which the residual tilt is read (s).
+RESIDUAL_WINDOW = 1.0
+
 #: The warnings, worst first (the order of the first line and of the list under it).
-WARNING_ORDER = ("chattering", "saturation", "drift", "small margin")
+WARNING_ORDER = ("chattering", "saturation", "unsettled", "drift", "small margin")
 #: Warnings named on the first line; the others are listed under it.
 HEADLINE_WARNINGS = 2
 
@@ -128,18 +162,31 @@ class Limits:
     x_max: float = 0.40
     q_alpha: float = 0.001
     q_x: float = 22.75e-6
+    #: The seesaw's tilt stop (rad), where it rests when the motor is cut; None for the pendulum.
+    angle_stop: float | None = None
 
     @classmethod
     def of(cls, params: Any = None, supervisor: Mapping[str, Any] | None = None) -> "Limits":
-        """The limits of plant parameters (``V_max``, encoder steps) and supervisor start values."""
+        """The limits of plant parameters (``V_max``, encoder steps; the seesaw's ``q_theta`` and
+        ``theta_stop``) and supervisor start values.
+
+        Examples
+        --------
+        >>> from pendulab.model.seesaw import SeesawParameters
+        >>> limits = Limits.of(SeesawParameters(), {"alpha_max": math.radians(10), "x_max": 0.35})
+        >>> round(math.degrees(limits.angle_stop), 1), limits.x_max
+        (11.5, 0.35)
+        """
         sup = dict(supervisor or {})
         base = cls()
+        seesaw = hasattr(params, "theta_stop")
         values = {
             "V_max": float(getattr(params, "V_max", base.V_max)),
-            "q_alpha": float(getattr(params, "q_alpha", base.q_alpha)),
+            "q_alpha": float(getattr(params, "q_theta" if seesaw else "q_alpha", base.q_alpha)),
             "q_x": float(getattr(params, "q_x", base.q_x)),
             "alpha_max": float(sup.get("alpha_max", base.alpha_max)),
             "x_max": float(sup.get("x_max", base.x_max)),
+            "angle_stop": float(params.theta_stop) if seesaw else None,
         }
         return cls(**values)
 
@@ -169,6 +216,7 @@ class Verdict:
     cut_time: float | None = None
     warnings: tuple[Warning, ...] = ()
     measures: dict[str, Any] = field(default_factory=dict)
+    plant: str = "pendulum"
 
     @property
     def clean(self) -> bool:
@@ -179,9 +227,13 @@ class Verdict:
         """The first line a student reads: the outcome and the worst warnings."""
         if self.measures.get("before_poke"):
             return f"CUT at t = {self.cut_time:.3f} s before the poke: {self.cut_reason}; there is no response to measure"
-        if self.outcome == "not tested":
+        if self.plant == "seesaw":
+            text = self._seesaw_text()
+            if self.outcome == "not tested" or (self.outcome == "balanced" and not self.warnings):
+                return text
+        elif self.outcome == "not tested":
             return "NOT TESTED: the run had no disturbance (a poke of size or length 0), so any controller stays up"
-        if self.outcome == "fell":
+        elif self.outcome == "fell":
             where = {"angle limit": f"the angle passed the {self._angle_limit()} limit",
                      "catch missed": "the swing-up's catch missed"}.get(str(self.cut_reason), "the pendulum fell")
             text = f"FELL at t = {self.cut_time:.3f} s: {where}"
@@ -219,13 +271,43 @@ class Verdict:
     def _angle_limit(self) -> str:
         return f"{math.degrees(self.measures.get('alpha_max', math.radians(15))):.0f}°"
 
+    def _seesaw_text(self) -> str:
+        """The seesaw's first line before its warnings: held level (the tap's peak and the settling), fell
+        (the tilt limit, the tilt stop), cut (the track), not tested."""
+        m = self.measures
+        if self.outcome == "not tested":
+            return "NOT TESTED: the run had no disturbance (a tap of size or length 0), so any controller holds the seesaw level"
+        if self.outcome == "fell":
+            stop = f"its {math.degrees(m.get('angle_stop') or 0.0):.1f}° tilt stop"
+            if self.cut_reason == "tilt stop":
+                return f"FELL at t = {self.cut_time:.3f} s: the seesaw hit {stop}"
+            text = f"FELL at t = {self.cut_time:.3f} s: the tilt passed the {self._angle_limit()} limit (the supervisor cut the motor)"
+            if m.get("stop_time_s") is not None:
+                text += f" and the seesaw hit {stop} at t = {m['stop_time_s']:.3f} s"
+            return text
+        if self.outcome == "cut":
+            text = f"CUT at t = {self.cut_time:.3f} s: {_CUT_WORDS.get(str(self.cut_reason), f'the session ended early ({self.cut_reason})')}"
+            if self.cut_reason == "track limit":
+                text += f" ({m.get('x_max', 0.35):.2f} m) with the seesaw still up"
+                if m.get("tilt_at_cut_rad") is not None:
+                    text += f" (tilt {math.degrees(m['tilt_at_cut_rad']):.1f}°)"
+            return text
+        peak = math.degrees(abs(m.get("peak_tilt_rad") or 0.0))
+        settled = m.get("tilt_settling_time_s")
+        band = f"{math.degrees(TILT_BAND):.0f}°"
+        if settled is None:
+            return f"HELD UP for {self.end_time:g} s (the tap tilted it {peak:.1f}°)"
+        if settled == 0.0:
+            return f"HELD LEVEL for {self.end_time:g} s: the tap tilted it {peak:.1f}°, within {band} throughout"
+        return f"HELD LEVEL for {self.end_time:g} s: the tap's {peak:.1f}° tilt settled within {band} in {settled:.2f} s"
+
     def lines(self) -> list[str]:
         """The headline, then one line per warning (with its advice)."""
         return [self.headline(), *(f"  warning: {w.line()}" for w in self.warnings)]
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON data (``metrics.json``'s ``verdict``)."""
-        return {
+        """Plain JSON data (``metrics.json``'s ``verdict``; ``plant`` only for a plant other than the pendulum)."""
+        data = {
             "outcome": self.outcome,
             "headline": self.headline(),
             "clean": self.clean,
@@ -235,6 +317,9 @@ class Verdict:
             "warnings": [asdict(w) for w in self.warnings],
             "measures": dict(self.measures),
         }
+        if self.plant != "pendulum":
+            data["plant"] = self.plant
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Verdict":
@@ -242,7 +327,7 @@ class Verdict:
         warnings = tuple(Warning(**w) for w in data.get("warnings") or ())
         return cls(
             str(data["outcome"]), float(data.get("end_time_s") or 0.0), data.get("cut_reason"), data.get("cut_time_s"),
-            warnings, dict(data.get("measures") or {}),
+            warnings, dict(data.get("measures") or {}), str(data.get("plant") or "pendulum"),
         )
 
 
@@ -256,6 +341,7 @@ def judge(
     end_reason: str | None = None,
     recentre: bool = False,
     caught: bool = False,
+    plant: str = "pendulum",
 ) -> Verdict:
     """The verdict of a run from its columns.
 
@@ -278,7 +364,25 @@ def judge(
     caught : bool
         The run starts at a swing-up's catch (``poke_start`` is the catch): the angle is then up to
         the capture window by design, so its margin is not judged (the cart's is).
+    plant : {"pendulum", "seesaw"}
+        The seesaw's columns have the tilt ``theta`` (and ``theta_measured``) where the pendulum's have
+        ``alpha``; ``poke_start`` is its tap. Give it ``Limits.of(SeesawParameters, its supervisor)``.
+        Its verdict has its own words and measures (the module's "The seesaw").
+
+    Examples
+    --------
+    >>> t = np.linspace(0.0, 5.0, 5001)
+    >>> tilt = np.where(t < 1.0, 0.0, 0.09 * np.exp(-2 * (t - 1)) * np.sin(8 * (t - 1)))
+    >>> cols = {"t": t, "x": 0 * t, "theta": tilt, "voltage": 0 * t, "supervisor_state": np.full_like(t, 2.0)}
+    >>> seesaw = Limits(alpha_max=math.radians(10), x_max=0.35, angle_stop=math.radians(11.5))
+    >>> judge(cols, poke_start=1.0, limits=seesaw, plant="seesaw").headline()
+    "HELD LEVEL for 5 s: the tap's 3.6° tilt settled within 2° in 0.30 s"
     """
+    if plant not in PLANTS:
+        raise ValueError(f"unknown plant {plant!r}; one of {', '.join(PLANTS)}")
+    seesaw = plant == "seesaw"
+    if seesaw:
+        columns = _tilt_as_angle(columns)
     limits = limits or Limits()
     t = np.asarray(columns["t"], dtype=float)
     alpha = np.asarray(columns["alpha"], dtype=float)
@@ -290,9 +394,11 @@ def judge(
     if cut_time is not None:
         outcome = "fell" if cut_reason in FELL_REASONS else "cut"
     else:
-        fallen = np.flatnonzero(~np.isfinite(alpha) | (np.abs(np.nan_to_num(alpha, nan=np.inf)) >= FALLEN_ANGLE))
+        # Without a trip: the seesaw fell when it reached its tilt stop, the pendulum past 90 degrees.
+        fallen_at = limits.angle_stop * (1 - 1e-6) if seesaw and limits.angle_stop else FALLEN_ANGLE
+        fallen = np.flatnonzero(~np.isfinite(alpha) | (np.abs(np.nan_to_num(alpha, nan=np.inf)) >= fallen_at))
         if fallen.size:
-            outcome, cut_time, cut_reason = "fell", float(t[fallen[0]]), None
+            outcome, cut_time, cut_reason = "fell", float(t[fallen[0]]), ("tilt stop" if seesaw and np.isfinite(alpha[fallen[0]]) else None)
         elif end_reason:
             outcome, cut_time, cut_reason = "cut", end_time, end_reason
     if poke is not None and (poke[0] == 0 or poke[1] <= 0) and outcome == "balanced":
@@ -308,9 +414,85 @@ def judge(
             warnings += _voltage_warnings(tw, np.asarray(columns["voltage"], dtype=float)[window], span, limits, measures)
         if outcome in ("balanced", "not tested"):
             x = np.asarray(columns["x"], dtype=float)[window] if "x" in columns else None
-            warnings += _cart_and_margin_warnings(tw, None if caught else alpha[window], x, limits, measures, recentre)
+            warnings += _cart_and_margin_warnings(tw, None if caught else alpha[window], x, limits, measures, recentre,
+                                                  angle_margin=TILT_MARGIN if seesaw else ANGLE_MARGIN)
+    if seesaw:
+        x_all = np.asarray(columns["x"], dtype=float) if "x" in columns else None
+        warnings = _seesaw_warnings(warnings, t, alpha, x_all, poke_start, cut_time, outcome, limits, measures)
     warnings.sort(key=lambda w: WARNING_ORDER.index(w.kind))
-    return Verdict(outcome, end_time, cut_reason, cut_time, tuple(warnings), measures)
+    return Verdict(outcome, end_time, cut_reason, cut_time, tuple(warnings), measures, plant)
+
+
+def _tilt_as_angle(columns: Mapping[str, Any]) -> dict[str, Any]:
+    """A seesaw run's columns with its tilt under the pendulum's angle names (the rules read ``alpha``)."""
+    out = dict(columns)
+    if "theta" in columns:
+        out["alpha"] = columns["theta"]
+        out["alpha_measured"] = columns.get("theta_measured", columns["theta"])
+    return out
+
+
+#: The seesaw's advice per warning (its controller is a state feedback: the LQR's weights are its knobs).
+_SEESAW_ADVICE = {
+    "saturation": "raise R (pendulab lqr --r, the GUI's R) or lower the Q weights, so that K asks for less voltage",
+    "chattering": "raise R (pendulab lqr --r) for smaller gains, or lower the derivative filters' frequency",
+    "drift": "the state feedback should hold the cart: weight x more (the first Q weight) or keep the integral on",
+    "small margin": "weight the tilt more (the second Q weight) for a smaller tilt, or x (the first) for less cart travel",
+}
+
+
+def _seesaw_warnings(warnings: list[Warning], t: np.ndarray, theta: np.ndarray, x: np.ndarray | None, tap_start: float,
+                     cut_time: float | None, outcome: str, limits: Limits, measures: dict[str, Any]) -> list[Warning]:
+    """The seesaw's measures (tap peak, settling within 2 degrees, residual tilt, the tilt stop, the cart's
+    excursion up to the end or the cut) and its words."""
+    last = cut_time if cut_time is not None else (float(t[-1]) if t.size else 0.0)
+    window = (t >= tap_start) & (t <= last)
+    tilt = np.nan_to_num(theta)
+    measures["angle_stop"] = limits.angle_stop
+    if x is not None and window.any():
+        measures.setdefault("largest_x_m", float(np.max(np.abs(np.nan_to_num(x[window])))))
+    if window.any():
+        i = int(np.flatnonzero(window)[np.argmax(np.abs(tilt[window]))])
+        measures["peak_tilt_rad"] = float(tilt[i])
+        measures["peak_tilt_time_s"] = float(t[i] - tap_start)
+    if limits.angle_stop:
+        at_stop = np.flatnonzero(np.abs(tilt) >= limits.angle_stop * (1 - 1e-6))
+        measures["stop_time_s"] = float(t[at_stop[0]]) if at_stop.size else None
+    if outcome == "cut" and cut_time is not None:
+        measures["tilt_at_cut_rad"] = float(np.interp(cut_time, t, tilt))
+    measures["tilt_settling_time_s"] = None
+    largest = measures.get("largest_alpha_rad")
+    harder = f"(a tap about {100 * (limits.alpha_max / largest - 1):.0f} % harder would reach it)" if largest else ""
+    if outcome not in ("balanced", "not tested") or not window.any():
+        return [_reworded(w, harder) for w in warnings]
+    tw, yw = t[window], tilt[window]
+    outside = np.flatnonzero(np.abs(yw) > TILT_BAND)
+    tail = tw >= tw[-1] - RESIDUAL_WINDOW
+    measures["residual_tilt_rad"] = float(np.max(np.abs(yw[tail])))
+    if not outside.size:
+        measures["tilt_settling_time_s"] = 0.0
+    elif outside[-1] + 1 < tw.size and tw[-1] - tw[outside[-1]] >= TILT_HOLD:
+        measures["tilt_settling_time_s"] = float(tw[outside[-1] + 1] - tap_start)
+    out = [_reworded(w, harder) for w in warnings]
+    if measures["tilt_settling_time_s"] is None:
+        band = math.degrees(TILT_BAND)
+        end_tilt = math.degrees(float(yw[-1]))
+        out.append(Warning(
+            "unsettled", float(np.max(np.abs(yw[tail]))), "rad in the last second",
+            f"the tilt did not stay within {band:.0f}° of level for the last {TILT_HOLD:g} s of the run "
+            f"(it is {end_tilt:+.1f}° at the end, up to {math.degrees(measures['residual_tilt_rad']):.1f}° in the last second)",
+            "run longer (--stop-time 10) to see whether it settles, or weight the tilt and its integral more "
+            "(the second and fifth Q weights)",
+            f"the tilt did not settle within {band:.0f}° ({end_tilt:+.1f}° at the end)",
+        ))
+    return out
+
+
+def _reworded(w: Warning, harder: str) -> Warning:
+    """A warning in the seesaw's words: its tilt, its tap (``harder``: how much harder a tap reaches the limit), its advice."""
+    text = w.text.replace("the angle reached", "the tilt reached").replace("after the poke", "after the tap")
+    text = text.replace("(a hand's poke on the rig varies by about a factor of two)", harder)
+    return Warning(w.kind, w.value, w.unit, text, _SEESAW_ADVICE.get(w.kind, w.advice), w.short)
 
 
 def _supervisor_cut(t: np.ndarray, columns: Mapping[str, Any], limits: Limits | None = None) -> tuple[float | None, str | None]:
@@ -377,13 +559,13 @@ def _voltage_warnings(t: np.ndarray, v: np.ndarray, span: float, limits: Limits,
 
 
 def _cart_and_margin_warnings(t: np.ndarray, alpha: np.ndarray | None, x: np.ndarray | None, limits: Limits, measures: dict[str, Any],
-                              recentre: bool = False) -> list[Warning]:
+                              recentre: bool = False, angle_margin: float = ANGLE_MARGIN) -> list[Warning]:
     out: list[Warning] = []
     largest_alpha = float(np.max(np.abs(alpha))) if alpha is not None else 0.0
     if alpha is not None:
         measures["largest_alpha_rad"] = largest_alpha
     small: list[str] = []
-    if largest_alpha > ANGLE_MARGIN * limits.alpha_max:
+    if largest_alpha > angle_margin * limits.alpha_max:
         small.append(f"the angle reached {math.degrees(largest_alpha):.1f}° of the {math.degrees(limits.alpha_max):.0f}° limit")
     if x is not None:
         x = np.nan_to_num(x)
@@ -439,6 +621,7 @@ def assess(
     end_reason: str | None = None,
     recentre: bool = False,
     caught: bool = False,
+    plant: str = "pendulum",
 ) -> tuple[dict[str, Any], Verdict]:
     """``metrics.json``'s content for a run: the metrics where they mean something, and the verdict.
 
@@ -449,7 +632,9 @@ def assess(
       the reason for each (the loop chatters; no swing above the encoder's resolution; the swings do
       not decay; cut before the response settled);
     * ``safety_cut_reason``: which limit the supervisor cut at (``null`` without a cut);
-    * ``verdict``: :meth:`Verdict.to_dict`; ``stable`` is true exactly when the outcome is ``balanced``.
+    * ``verdict``: :meth:`Verdict.to_dict`; ``stable`` is true exactly when the outcome is ``balanced``;
+    * the seesaw's (``plant="seesaw"``; the SPEC's metrics are then its tilt's): :data:`SEESAW_METRICS`,
+      each ``null`` with its reason in ``not_reported`` where it does not apply.
 
     Returns
     -------
@@ -459,8 +644,11 @@ def assess(
     from pendulab.analysis.metrics import compute_metrics
 
     limits = limits or Limits()
+    if plant == "seesaw":
+        columns = _tilt_as_angle(columns)
     t = np.asarray(columns["t"], dtype=float)
-    verdict = judge(columns, poke_start=poke_start, limits=limits, poke=poke, end_reason=end_reason, recentre=recentre, caught=caught)
+    verdict = judge(columns, poke_start=poke_start, limits=limits, poke=poke, end_reason=end_reason, recentre=recentre, caught=caught,
+                    plant=plant)
     cut = safety_cut_time if safety_cut_time is not None else (verdict.cut_time if verdict.cut_reason is not None else None)
     metrics = compute_metrics(
         t, columns["alpha"], poke_start=poke_start, q_alpha=limits.q_alpha,
@@ -475,8 +663,38 @@ def assess(
     metrics["not_reported"] = reasons
     metrics["stable"] = verdict.outcome == "balanced"
     metrics["safety_cut_reason"] = verdict.cut_reason if verdict.outcome in ("cut", "fell") else None
+    if plant == "seesaw":
+        metrics.update(_seesaw_metrics(verdict, metrics, reasons))
     metrics["verdict"] = verdict.to_dict()
     return metrics, verdict
+
+
+#: The seesaw's own metrics (``metrics.json``): the tap's peak tilt, the time the tilt took to come back
+#: within :data:`TILT_BAND` of level for good, the largest tilt over the last :data:`RESIDUAL_WINDOW` s,
+#: and the cart's largest excursion.
+SEESAW_METRICS = ("peak_tilt_rad", "tilt_settling_time_s", "residual_tilt_rad", "max_abs_x_m")
+
+
+def _seesaw_metrics(verdict: Verdict, metrics: Mapping[str, Any], reasons: dict[str, str]) -> dict[str, Any]:
+    """The seesaw's metrics from its verdict's measures; ``reasons`` gains why one is left out."""
+    m = verdict.measures
+    values = {"peak_tilt_rad": m.get("peak_tilt_rad"), "tilt_settling_time_s": m.get("tilt_settling_time_s"),
+              "residual_tilt_rad": m.get("residual_tilt_rad"), "max_abs_x_m": m.get("largest_x_m")}
+    ended = {"fell": "the seesaw fell", "cut": "the run was cut"}.get(verdict.outcome)
+    band = f"{math.degrees(TILT_BAND):.0f}°"
+    why = {
+        "peak_tilt_rad": "no sample after the tap",
+        "tilt_settling_time_s": (f"{ended} before the tilt settled" if ended else
+                                 f"the tilt did not stay within {band} of level for the last {TILT_HOLD:g} s of the run"),
+        "residual_tilt_rad": f"{ended}: the residual tilt is read over the last second of a run that holds the seesaw",
+        "max_abs_x_m": "no cart position after the tap",
+    }
+    reasons.update({key: why[key] for key in SEESAW_METRICS if values[key] is None})
+    if verdict.outcome == "balanced" and metrics.get("limit_cycle_amplitude_rad") is None:
+        for key in ("limit_cycle_amplitude_rad", "limit_cycle_frequency_rad_s"):
+            reasons.setdefault(key, "no steady oscillation in the second half of the run: the tilt may still be converging "
+                                    "(a friction and quantization limit cycle shows once it has: run longer, e.g. --stop-time 20)")
+    return values
 
 
 def _with_limit_cycle(verdict: Verdict, cycle: tuple[float, float]) -> Verdict:

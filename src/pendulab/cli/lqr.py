@@ -6,7 +6,6 @@ import argparse
 import json
 
 from pendulab.cli.options import add_overwrite_option
-from pendulab.errors import UserError
 from pendulab.outputs import check_output_file
 
 
@@ -30,22 +29,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _numbers(text: str | None, option: str) -> list[float] | None:
-    if text is None:
-        return None
-    try:
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise UserError(f"{option} {text!r} must be numbers separated by commas, e.g. {option} 1000,5000,0,0,2000") from None
-
-
 def run(args: argparse.Namespace) -> int:
-    from pendulab.control.state_feedback import design_state_feedback
+    from pendulab.control.state_feedback import design_from_text
 
-    q = _numbers(args.q, "--q")
-    r = _numbers(args.r, "--r")
-    if r is not None and len(r) != 1:
-        raise UserError(f"--r {args.r!r} must be one number > 0")
     params = None
     if args.plant == "pendulum":
         from pendulab.model.parameters import PlantParameters
@@ -53,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         params = PlantParameters.preset(args.pendulum)
     if args.out:
         check_output_file(args.out, "--out", suffixes=(".toml",), overwrite=args.overwrite)
-    design = design_state_feedback(args.plant, q, None if r is None else r[0], args.integral, params)
+    design = design_from_text(args.plant, args.q, args.r, args.integral, params)
     poles = [[float(p.real), float(p.imag)] for p in design.closed_loop_poles]
     if args.json:
         print(json.dumps({"plant": design.plant, "states": list(design.states), "K": [float(k) for k in design.K],

@@ -126,6 +126,8 @@ def seesaw_spec_from_args(args: argparse.Namespace, timing: Any, poke: Any) -> R
     if args.recentre or args.swing_up or getattr(args, "start", "upright") != "upright" or args.pendulum != "long":
         raise UserError("--recentre, --swing-up, --start and --pendulum are the pendulum's; the seesaw has none of them")
     design = design_state_feedback("seesaw") if args.demo else load_state_feedback_file(args.controller)
+    if poke is not None:
+        poke.check_disturbs(what="tap")  # with no tap the run would test nothing
     spec = RunSpec(
         ControllerSpec(state_feedback=design),
         plant=Plant(kind="seesaw", cart=args.cart, calibration=str(args.calibration) if args.calibration else None),
@@ -249,13 +251,13 @@ def _metric_line(label: str, m: dict[str, Any], key: str, unit: str) -> str:
 def _print_summary(result: Any, prediction: Any, out_dir: Path, written: list[Path], elapsed: float) -> None:
     m = result.metrics
     verdict = result.verdict
-    if verdict is not None:
-        # The first line is the verdict: the outcome and the worst warnings; the warnings follow, one a line.
-        print("\n".join(verdict.lines()))
-    else:  # the seesaw: no verdict of its own yet
-        print("STABLE: the seesaw stayed level" if m.get("stable") else "NOT STABLE"
-              + (f" (safety cut at t = {m['safety_cut_time_s']:.3f} s)" if m.get("safety_cut_time_s") is not None else ""))
-    if prediction is not None and verdict is not None:
+    # The first line is the verdict: the outcome and the worst warnings; the warnings follow, one a line.
+    print("\n".join(verdict.lines()))
+    if verdict.plant == "seesaw":
+        _print_seesaw(result)
+        print(f"results in {out_dir}/ ({', '.join(p.name for p in written)}) after {elapsed:.1f} s")
+        return
+    if prediction is not None:
         agrees = prediction.agrees_with(verdict.outcome)
         print(f"  {prediction.describe()}: {'agrees with' if agrees else 'DISAGREES with'} the simulation"
               + ("" if agrees else _disagreement(prediction, verdict)))
@@ -290,6 +292,38 @@ def _print_summary(result: Any, prediction: Any, out_dir: Path, written: list[Pa
     for line in result.meta.get("mode_events", []):
         print(f"  {line}")
     print(f"results in {out_dir}/ ({', '.join(p.name for p in written)}) after {elapsed:.1f} s")
+
+
+def _print_seesaw(result: Any) -> None:
+    """The seesaw's tap response under its verdict: the peak, the settling within 2°, what is left, the cart."""
+    from pendulab.analysis.verdict import TILT_BAND
+
+    m = result.metrics
+    params = result.spec.parameters()
+    why = m.get("not_reported") or {}
+
+    def deg(value: float | None) -> str:
+        return "n/a" if value is None else f"{math.degrees(value):.2f}°"
+
+    print(f"  controller          {result.meta['controller']}")
+    print(f"  tap                 {params.tap_magnitude:g} rad/s² for {params.tap_duration:g} s at {params.tap_start:g} s")
+    peak_time = result.verdict.measures.get("peak_tilt_time_s")
+    print(f"  peak tilt           {deg(m.get('peak_tilt_rad'))}" + (f" at {peak_time:.3f} s after the tap" if peak_time is not None else ""))
+    band = f"{math.degrees(TILT_BAND):.0f}°"
+    settled = m.get("tilt_settling_time_s")
+    print(f"  settled within {band}   " + (f"{settled:.3f} s after the tap" if settled is not None else f"n/a ({why.get('tilt_settling_time_s', '')})"))
+    if m.get("residual_tilt_rad") is not None:
+        print(f"  last second         within {deg(m['residual_tilt_rad'])} of level")
+    amplitude, frequency = m.get("limit_cycle_amplitude_rad"), m.get("limit_cycle_frequency_rad_s")
+    if amplitude is not None and frequency is not None:
+        print(f"  limit cycle         ±{math.degrees(amplitude):.2f}° at {frequency:.3g} rad/s (sustained oscillation: friction and quantization)")
+    elif "limit_cycle_amplitude_rad" in why:
+        print(f"  limit cycle         n/a ({why['limit_cycle_amplitude_rad']})")
+    print(_metric_line("natural frequency", m, "natural_frequency_rad_s", " rad/s"))
+    print(_metric_line("overshoot", m, "overshoot_percent", " %"))
+    x_max = result.verdict.measures.get("x_max")
+    if m.get("max_abs_x_m") is not None:
+        print(f"  largest |x|         {m['max_abs_x_m']:.3f} m" + (f" (the supervisor cuts at {x_max:.2f} m)" if x_max else ""))
 
 
 def _disagreement(prediction: Any, verdict: Any) -> str:

@@ -114,6 +114,30 @@ def _linear_plant(plant: str, params: object | None) -> tuple[np.ndarray, np.nda
     return ss.A[np.ix_(order, order)], ss.B[order]
 
 
+def _state_model(plant: str, params: object | None, integral: bool) -> tuple[np.ndarray, np.ndarray]:
+    """A and B on the feedback vector's order (:func:`state_names`), the integral of the angle appended."""
+    A, B = _linear_plant(plant, params)
+    if integral:
+        A = np.block([[A, np.zeros((4, 1))], [np.eye(1, 4, 1), np.zeros((1, 1))]])  # d/dt integral = angle
+        B = np.vstack([B, [[0.0]]])
+    return A, B
+
+
+def closed_loop_poles(design: StateFeedbackDesign, params: object | None = None) -> np.ndarray:
+    """Eigenvalues of ``A - B K`` of the plant's continuous linear model with the design's K (e.g. a
+    controller file's, which holds K only), sorted by real part.
+
+    Examples
+    --------
+    >>> design = design_state_feedback("seesaw")
+    >>> bool(np.allclose(closed_loop_poles(design), design.closed_loop_poles))
+    True
+    """
+    A, B = _state_model(design.plant, params, design.integral)
+    poles = np.linalg.eigvals(A - B @ np.asarray(design.K, dtype=float).reshape(1, -1))
+    return poles[np.lexsort((poles.imag, poles.real))]
+
+
 def design_state_feedback(
     plant: str = "seesaw",
     q: Sequence[float] | None = None,
@@ -169,10 +193,7 @@ def design_state_feedback(
         raise UserError(f"--r must be a finite number > 0 (the voltage's weight), got {r:g}")
     import control
 
-    A, B = _linear_plant(plant, params)
-    if integral:
-        A = np.block([[A, np.zeros((4, 1))], [np.eye(1, 4, 1), np.zeros((1, 1))]])  # d/dt integral = angle
-        B = np.vstack([B, [[0.0]]])
+    A, B = _state_model(plant, params, integral)
     try:
         K, _, poles = control.lqr(A, B, np.diag(q), r)
     except Exception as exc:  # an undetectable or unstabilizable weighting
@@ -180,6 +201,34 @@ def design_state_feedback(
     poles = np.asarray(poles)
     gains = tuple(float(k) for k in np.ravel(np.asarray(K)))
     return StateFeedbackDesign(plant, names, gains, poles[np.lexsort((poles.imag, poles.real))], q, r)
+
+
+def _numbers(text: str, option: str) -> list[float]:
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise UserError(f"{option} {text!r} must be numbers separated by commas, e.g. {option} 1000,5000,0,0,2000") from None
+
+
+def design_from_text(
+    plant: str, q: str | None, r: str | None, integral: bool | None = None, params: object | None = None
+) -> StateFeedbackDesign:
+    """:func:`design_state_feedback` from typed text: ``q`` as ``"Q1,Q2,..."``, ``r`` one number (``pendulab lqr``
+    and the GUI); None is the plant's default. Messages name ``--q`` and ``--r``.
+
+    Examples
+    --------
+    >>> design_from_text("seesaw", "1000,5000,0,0,2000", "0.5") == design_state_feedback("seesaw")
+    True
+    >>> design_from_text("seesaw", "1000,5000", "0.5", integral=True)
+    Traceback (most recent call last):
+    pendulab.errors.UserError: --q has 2 weights but the state has 5 (x, theta, xdot, thetadot, theta_integral); give one weight per state (4 without --integral)
+    """
+    weights = None if q is None else _numbers(q, "--q")
+    voltage = None if r is None else _numbers(r, "--r")
+    if voltage is not None and len(voltage) != 1:
+        raise UserError(f"--r {r!r} must be one number > 0")
+    return design_state_feedback(plant, weights, None if voltage is None else voltage[0], integral, params)
 
 
 def save_state_feedback_file(design: StateFeedbackDesign, path: str) -> None:
@@ -214,20 +263,35 @@ def load_state_feedback_file(path: str) -> StateFeedbackDesign:
         The file is missing, not TOML, or its table is incomplete or inconsistent.
     """
     try:
+        with open(path, "rb") as handle:
+            text = handle.read().decode("utf-8")
+    except OSError as exc:
+        raise UserError(f"cannot read controller file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise UserError(f"controller file {path} is not a text file; give the TOML file 'pendulab lqr --out FILE' wrote") from None
+    return state_feedback_from_text(text, str(path))
+
+
+def state_feedback_from_text(text: str, name: str) -> StateFeedbackDesign:
+    """A controller file's text (:func:`save_state_feedback_file`'s TOML) as a design; ``name`` names it in messages.
+
+    Raises
+    ------
+    UserError
+        Not TOML, no ``[state_feedback]`` table, or an incomplete or inconsistent one.
+    """
+    try:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
         import tomli as tomllib  # type: ignore[no-redef]
     try:
-        with open(path, "rb") as handle:
-            data = tomllib.load(handle)
-    except OSError as exc:
-        raise UserError(f"cannot read controller file {path}: {exc.strerror or exc}") from None
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"controller file {path} is not valid TOML: {exc}") from None
+        raise UserError(f"controller file {name} is not valid TOML: {exc}") from None
     table = data.get("state_feedback")
     if not isinstance(table, dict):
-        raise UserError(f"controller file {path} has no [state_feedback] table; write one with 'pendulab lqr --out FILE'")
-    return design_from_table(table, f"controller file {path}")
+        raise UserError(f"controller file {name} has no [state_feedback] table; write one with 'pendulab lqr --out FILE'")
+    return design_from_table(table, f"controller file {name}")
 
 
 def design_from_table(table: Any, source: str = "state feedback") -> StateFeedbackDesign:

@@ -85,6 +85,20 @@ def _tap_default() -> tuple[float, float, float]:
 TAP_DEFAULT = _tap_default()
 
 
+def supervisor_start_values(supervisor: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The seesaw's Supervisor FMU start values: :data:`SUPERVISOR_LIMITS`, then the run's own settings."""
+    return {**SUPERVISOR_LIMITS, **dict(supervisor or {})}
+
+
+def verdict_limits(params: Any = None, supervisor: Mapping[str, Any] | None = None) -> Any:
+    """The limits a seesaw run is judged against (:class:`pendulab.analysis.verdict.Limits`): the seesaw's
+    tilt encoder step and tilt stop (``params``, default the courseware's), its supervisor's limits."""
+    from pendulab.analysis.verdict import Limits
+    from pendulab.model.seesaw import SeesawParameters
+
+    return Limits.of(params if params is not None else SeesawParameters(), supervisor_start_values(supervisor))
+
+
 def seesaw_system(
     params: Any,
     controller_parameters: Mapping[str, Any],
@@ -110,7 +124,7 @@ def seesaw_system(
     system = System(step=step)
     system.add("seesaw", ensure_fmu("Seesaw", fmu_dir), params.as_dict())
     system.add("controller", ensure_fmu("Controller", fmu_dir), {"h": step, **controller_parameters})
-    system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), {**SUPERVISOR_LIMITS, **dict(supervisor or {})})
+    system.add("supervisor", ensure_fmu("Supervisor", fmu_dir), supervisor_start_values(supervisor))
     for source, target in CONNECTIONS:
         system.connect(source, target, delay=delay if target == "seesaw.V" else 0)
     return system
@@ -125,9 +139,10 @@ def simulate_seesaw(
     meta: Mapping[str, Any] | None = None,
     fmu_dir: str | Path | None = None,
 ) -> Any:
-    """:func:`pendulab.simulate` of a validated seesaw spec (``spec.plant.kind == "seesaw"``)."""
-    from pendulab.analysis.metrics import compute_metrics
+    """:func:`pendulab.simulate` of a validated seesaw spec (``spec.plant.kind == "seesaw"``), judged as a seesaw
+    (:func:`pendulab.analysis.verdict.assess` with ``plant="seesaw"``)."""
     from pendulab.analysis.results import SEESAW_COLUMNS
+    from pendulab.analysis.verdict import assess
     from pendulab.cosim.master import Master
     from pendulab.simulation import SimulationResult, build_system, run_meta
 
@@ -140,11 +155,12 @@ def simulate_seesaw(
     columns.update({name: np.asarray(log[path], dtype=float) for path, name in RECORDED.items()})
     tripped = np.flatnonzero(columns["trip_reason"] > 0)
     safety_cut = float(columns["trip_time"][tripped[0]]) if tripped.size else None
-    columns = {k: columns[k] for k in SEESAW_COLUMNS}
-    metrics = compute_metrics(columns["t"], columns["theta"], poke_start=params.tap_start, q_alpha=params.q_theta,
-                              xdot=columns["xdot"], safety_cut_time=safety_cut)
+    # The files have the seesaw's columns and, as the pendulum's, the supervisor's trip_reason.
+    columns = {k: columns[k] for k in (*SEESAW_COLUMNS, "trip_reason")}
+    metrics, verdict = assess(columns, poke_start=params.tap_start, limits=verdict_limits(params, spec.supervisor_parameters()),
+                              poke=(params.tap_magnitude, params.tap_duration), safety_cut_time=safety_cut, plant="seesaw")
     for name in record:
         columns[name] = np.asarray(log[name])
     info = run_meta(spec, params)
     info.update(meta or {})
-    return SimulationResult(columns, metrics, info, spec)
+    return SimulationResult(columns, metrics, info, spec, verdict)

@@ -5,6 +5,10 @@ the form raises :class:`~pendulab.errors.UserError` with the same message as the
 because the form is read by the same functions: :func:`pendulab.control.entry.controller_from_options`
 for the controller, and a :class:`pendulab.spec.RunSpec` (its ``validate``) for the run.
 
+The plant is the form's ``plant`` ("pendulum" or "seesaw"). The seesaw's controller is a state feedback:
+an LQR designed from the typed Q and R (:func:`pendulab.control.state_feedback.design_from_text`, as
+``pendulab lqr``), Quanser's by default, or a controller file that ``pendulab lqr --out`` wrote.
+
 Heavy imports (numpy, python-control, CasADi) happen inside the functions: the server starts and draws
 the first page before any of them is needed.
 """
@@ -39,10 +43,39 @@ def _number(value: Any, what: str) -> float:
     return number
 
 
+def plant_kind(form: Mapping[str, Any]) -> str:
+    """The form's plant: ``"pendulum"`` (default) or ``"seesaw"``."""
+    kind = _text(form, "plant") or "pendulum"
+    if kind not in ("pendulum", "seesaw"):
+        raise UserError(f"plant {kind!r}: choose the pendulum or the seesaw")
+    return kind
+
+
+def parse_state_feedback_form(form: Mapping[str, Any]) -> Any:
+    """The seesaw's controller: an LQR from the typed Q and R (``mode`` "lqr"), or a controller file's text
+    (``mode`` "file", ``file`` = {"name", "text"}); ``pendulab lqr``'s rules and messages."""
+    from pendulab.control.state_feedback import design_from_text, state_feedback_from_text
+
+    if form.get("mode") == "file":
+        upload = form.get("file") or {}
+        name = Path(_text(upload, "name").replace("\\", "/")).name
+        if not name:
+            raise UserError("choose the controller file that 'pendulab lqr --plant seesaw --out FILE' wrote")
+        design = state_feedback_from_text(_text(upload, "text"), name)
+        if design.plant != "seesaw":
+            raise UserError(f"controller file {name} is a state feedback for the {design.plant}; design one for the seesaw "
+                            "with 'pendulab lqr --plant seesaw --out FILE' or type Q and R")
+        return design
+    return design_from_text("seesaw", _text(form, "q"), _text(form, "r"), bool(form.get("integral", True)))
+
+
 def parse_controller_form(form: Mapping[str, Any]) -> Any:
-    """The controller of the form: kernel plus compensators, or PID; the command line's rules and messages."""
+    """The controller of the form: kernel plus compensators, or PID (the seesaw's: a state feedback); the
+    command line's rules and messages."""
     from pendulab.control.entry import controller_from_options
 
+    if plant_kind(form) == "seesaw":
+        return parse_state_feedback_form(form)
     if form.get("mode") == "pid":
         pid = form.get("pid") or {}
         values = [_text(pid, k).strip() for k in ("kp", "ki", "kd")]
@@ -66,20 +99,34 @@ def parse_controller_form(form: Mapping[str, Any]) -> Any:
 
 
 def check_controller(form: Mapping[str, Any]) -> dict[str, Any]:
-    """``{"ok": True, "describe": G(s) formatted, "factors": [...]}`` or ``{"ok": False, "error": message}``."""
+    """``{"ok": True, "describe": G(s) formatted, "factors": [...]}`` or ``{"ok": False, "error": message}``.
+
+    The seesaw's: ``describe`` the law and K, ``states``, ``K``, ``closed_loop_poles`` (as ``pendulab lqr`` prints).
+    """
     try:
         controller = parse_controller_form(form)
     except UserError as exc:
         return {"ok": False, "error": in_form_words(str(exc))}
+    if plant_kind(form) == "seesaw":
+        from pendulab.control.state_feedback import closed_loop_poles
+
+        # A - B K of the seesaw's linear model (a controller file holds K only).
+        poles = [complex(p) for p in closed_loop_poles(controller)]
+        return {"ok": True, "describe": controller.describe(), "states": list(controller.states), "K": list(controller.K),
+                "closed_loop_poles": [[p.real, p.imag] for p in poles], "q": list(controller.q),
+                "r": controller.r if math.isfinite(controller.r) else None}
     labels = ["kernel"] + [f"compensator {i}" for i in range(1, len(controller.factors))]
     factors = [{"label": label, "text": f.describe()} for label, f in zip(labels, controller.factors)]
     return {"ok": True, "describe": str(controller), "factors": factors, "order": controller.order}
 
 
 def plant_section(form: Mapping[str, Any], calibration_path: str | None) -> Any:
-    """The run's :class:`~pendulab.spec.Plant`: the chosen pendulum and cart, the chosen calibration."""
+    """The run's :class:`~pendulab.spec.Plant`: the chosen pendulum and cart (the seesaw: its IP02 cart), the
+    chosen calibration."""
     from pendulab.spec import Plant
 
+    if plant_kind(form) == "seesaw":
+        return Plant(kind="seesaw", calibration=str(calibration_path) if calibration_path else None)
     return Plant(pendulum=_text(form, "pendulum") or "long", cart=_text(form, "cart") or "ip02",
                  calibration=str(calibration_path) if calibration_path else None)
 
@@ -92,7 +139,8 @@ def plant_parameters(form: Mapping[str, Any], calibration_path: str | None) -> A
 #: The command line's option names -> the form's words, for messages of the checks both share.
 FORM_WORDS = (("--stop-time", "the stop time"), ("--step", "control period"), ("--delay", "transport delay"),
               ("--poke magnitude", "poke magnitude"), ("--poke duration", "poke duration"), ("--poke", "poke"),
-              ("--pid", "PID"), ("--gain K", "the kernel's gain"), ("--compensator", "compensator"))
+              ("--pid", "PID"), ("--gain K", "the kernel's gain"), ("--compensator", "compensator"),
+              ("--q", "Q"), ("--r ", "R "), ("--integral", "the integral"))
 
 
 def in_form_words(message: str) -> str:
@@ -117,9 +165,10 @@ def run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
 
 
 def _run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
-    from pendulab.spec import Poke, Quantization, RunSpec, Supervisor, Timing
+    from pendulab.spec import ControllerSpec, Poke, Quantization, RunSpec, Supervisor, Timing
 
-    controller = parse_controller_form(form.get("controller") or {})
+    seesaw = plant_kind(form) == "seesaw"
+    controller = parse_controller_form({**(form.get("controller") or {}), "plant": plant_kind(form)})
     stop_time = _number(form.get("stop_time", 5), "stop time")
     step = _number(form.get("step", 0.001), "control period")
     delay_value = _number(form.get("delay", 0), "transport delay")
@@ -131,9 +180,14 @@ def _run_spec(form: Mapping[str, Any], calibration_path: str | None) -> Any:
     timing = Timing(stop_time=stop_time, step=step, method=method, delay=int(delay_value))
     timing.validate()
     poke_form = form.get("poke") or {}
-    poke = Poke(*(_number(_text(poke_form, key), f"poke {key}") for key in ("magnitude", "duration", "start")))
+    word = "tap" if seesaw else "poke"  # the seesaw's disturbance is a tap on its track
+    poke = Poke(*(_number(_text(poke_form, key), f"{word} {key}") for key in ("magnitude", "duration", "start")))
     poke.validate()
-    poke.check_disturbs("poke magnitude", "poke duration")
+    poke.check_disturbs(f"{word} magnitude", f"{word} duration", word)
+    if seesaw:  # the seesaw has no supervisor modes: the form hides them
+        spec = RunSpec(ControllerSpec(state_feedback=controller), plant=plant_section(form, calibration_path), poke=poke, timing=timing,
+                       quantization=Quantization(enabled=bool(form.get("quantization", True))))
+        return spec.validate()
     # The supervisor's modes (issue 21); a swing-up starts hanging.
     swing_up = bool(form.get("swing_up"))
     plant = dataclasses.replace(plant_section(form, calibration_path), start="hanging" if swing_up else "upright")
@@ -147,12 +201,15 @@ def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[s
     """Root locus of ``Lp·C(s)·G(s)`` with the closed-loop poles, Bode plot and margins, sampled-loop verdict.
 
     The loop is the one ``pendulab tf --root-locus`` draws: the controller acts on ``e = -Lp·alpha``.
+    The seesaw's state feedback has no single loop: :func:`seesaw_linear_view`.
     """
     import numpy as np
 
     from pendulab.analysis.plots import root_locus
     from pendulab.model.linear import linearize
 
+    if plant_kind(form) == "seesaw":
+        return seesaw_linear_view(form, calibration_path)
     controller = parse_controller_form(form.get("controller") or {})
     params = plant_parameters(form, calibration_path)
     if params.Mp == 0:
@@ -196,6 +253,33 @@ def linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[s
     }
 
 
+def seesaw_linear_view(form: Mapping[str, Any], calibration_path: str | None) -> dict[str, Any]:
+    """The seesaw's poles: open loop (its linear model) and closed by the state feedback (``A - B K`` of the
+    continuous model, as ``pendulab lqr`` prints them; a controller file's K is placed on the same model).
+
+    ``{"seesaw": True, "open_poles", "closed_poles", "stable", "view"}`` (poles as ``{"re": [...], "im": [...]}``).
+    """
+    import numpy as np
+
+    from pendulab.control.state_feedback import closed_loop_poles
+    from pendulab.model.seesaw import linearize_seesaw
+
+    design = parse_controller_form({**(form.get("controller") or {}), "plant": "seesaw"})
+    params = plant_section(form, calibration_path).parameters()
+    open_poles = np.linalg.eigvals(linearize_seesaw(params).ss.A)
+    closed = closed_loop_poles(design, params)
+    both = np.concatenate([open_poles, closed])
+    reach = float(np.max(np.abs(both))) * 1.15 + 1.0
+    return {
+        "seesaw": True,
+        "open_poles": {"re": open_poles.real.tolist(), "im": open_poles.imag.tolist()},
+        "closed_poles": {"re": closed.real.tolist(), "im": closed.imag.tolist()},
+        "stable": bool(np.all(closed.real < 0)),
+        "unstable_open_loop_poles": int(np.sum(open_poles.real > 0)),
+        "view": [-reach, max(reach * 0.25, float(np.max(both.real)) * 1.2 + 1.0), reach * 0.6],
+    }
+
+
 def _bode(loop: Any) -> dict[str, Any]:
     import control
     import numpy as np
@@ -230,7 +314,8 @@ def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
     run = load_compared(folder)
     n = run.columns["t"].size
     stride = max(1, math.ceil(n / MAX_POINTS))
-    names = ("t", "alpha", "tip", "x", "voltage")
+    seesaw = "theta" in run.columns and "alpha" not in run.columns
+    names = ("t", "theta", "x", "voltage") if seesaw else ("t", "alpha", "tip", "x", "voltage")
     columns = {k: np.asarray(run.columns[k], dtype=float)[::stride].tolist() for k in names if k in run.columns}
     meta_lp = None
     if "tip" in run.columns and "alpha" in run.columns:
@@ -240,6 +325,7 @@ def run_data(folder: Path, label: str | None = None) -> dict[str, Any]:
     files = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in DOWNLOADABLE) if folder.is_dir() else []
     return {
         "label": label or run.label,
+        "plant": "seesaw" if seesaw else "pendulum",
         "source": run.source,
         "poke_start": run.poke_start,
         "columns": columns,

@@ -114,9 +114,9 @@ class GuiState:
         label, path = self.calibrations[key]
         return str(path), label
 
-    def new_folder(self, pendulum: str) -> Path:
+    def new_folder(self, name: str) -> Path:
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        base = self.out_dir / f"{stamp}-gui-{pendulum}"
+        base = self.out_dir / f"{stamp}-gui-{name}"
         path, k = base, 1
         while True:
             try:
@@ -134,9 +134,14 @@ class GuiState:
 
         path, calibration_label = self.calibration(form.get("calibration"))
         spec = run_spec(form, path)
-        pendulum = spec.plant.pendulum
-        folder = self.new_folder(pendulum)
-        label = f"{folder.name}: {spec.controller.transfer_function}, {pendulum}, poke {spec.poke.magnitude:g}"
+        if spec.plant.kind == "seesaw":
+            folder = self.new_folder("seesaw")
+            gains = ", ".join(f"{k:.4g}" for k in spec.controller.state_feedback.K)
+            label = f"{folder.name}: state feedback K = [{gains}], seesaw, tap {spec.poke.magnitude:g}"
+        else:
+            pendulum = spec.plant.pendulum
+            folder = self.new_folder(pendulum)
+            label = f"{folder.name}: {spec.controller.transfer_function}, {pendulum}, poke {spec.poke.magnitude:g}"
         run = Run(secrets.token_hex(8), tab, "sim", folder, label, stop_time=spec.timing.stop_time)
         q = self._context.Queue()
         meta = {"calibration": calibration_label, "source": "simulation"}
@@ -351,7 +356,9 @@ class Handler(BaseHTTPRequestHandler):
 
         if not (run.folder / "run.png").is_file():
             columns, meta = read_run(run.folder)
-            poke = float(meta.get("parameters", {}).get("poke_start", 1.0)) if isinstance(meta.get("parameters"), dict) else None
+            params = meta.get("parameters") if isinstance(meta.get("parameters"), dict) else None
+            # The seesaw's disturbance is its tap.
+            poke = float(params.get("poke_start", params.get("tap_start", 1.0))) if params else None
             plot_run(columns, run.folder, title=run.label, poke_start=poke)
         return self._json({"ok": True, "files": sorted(p.name for p in run.folder.glob("*.png"))})
 

@@ -20,7 +20,7 @@ import contextlib
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -547,8 +547,13 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
     metrics: dict[str, Any]
     if poke is not None and t.size > 10 and poke < last - 0.05:
         try:
-            metrics, _ = assess(columns, poke_start=poke, limits=Limits(q_alpha=q_alpha), safety_cut_time=cut,
-                                end_reason=end_reason if ended_early and not tripped.size else None)
+            limits = Limits(q_alpha=q_alpha)
+            if seesaw:  # judged as a seesaw: its limits (tilt, cart, tilt stop) with the rig's tilt step
+                from pendulab.cosim.seesaw import verdict_limits
+
+                limits = replace(verdict_limits(), q_alpha=q_alpha)
+            metrics, _ = assess(columns, poke_start=poke, limits=limits, safety_cut_time=cut,
+                                end_reason=end_reason if ended_early and not tripped.size else None, plant="seesaw" if seesaw else "pendulum")
         except Exception as exc:  # noqa: BLE001 - a log too short or odd for metrics still gets its files
             metrics = {"error": f"metrics could not be computed: {exc}"}
     elif cut is not None:

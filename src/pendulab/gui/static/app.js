@@ -18,6 +18,24 @@ const METRICS = [
   ["limit_cycle_amplitude_rad", "limit cycle amplitude", "rad"],
   ["limit_cycle_frequency_rad_s", "limit cycle frequency", "rad/s"],
 ];
+// The seesaw's rows (pendulab.analysis.verdict.SEESAW_METRICS and the SPEC's, of its tilt); angles in degrees.
+const DEG = 180 / Math.PI;
+const SEESAW_METRICS = [
+  ["verdict", "verdict", ""],
+  ["peak_tilt_rad", "tap's peak tilt", "°", DEG],
+  ["peak_time_s", "peak time", "s"],
+  ["tilt_settling_time_s", "settled within 2° after", "s"],
+  ["residual_tilt_rad", "largest tilt, last second", "°", DEG],
+  ["limit_cycle_amplitude_rad", "limit cycle amplitude", "°", DEG],
+  ["limit_cycle_frequency_rad_s", "limit cycle frequency", "rad/s"],
+  ["natural_frequency_rad_s", "natural frequency", "rad/s"],
+  ["overshoot_percent", "overshoot", "%"],
+  ["max_abs_x_m", "largest |x|", "m"],
+  ["safety_cut_time_s", "safety cut at", "s"],
+  ["safety_cut_reason", "safety cut reason", ""],
+];
+// The disturbance's defaults per plant: the pendulum's poke, the seesaw's tap (about 5° of tilt).
+const DISTURBANCE = { pendulum: ["poke", "50", "0.005"], seesaw: ["tap", "3.3", "0.1"] };
 
 // Each tab has its own id: the server lists a run only in the tab that started or opened it.
 let TAB = sessionStorage.getItem("pendulabTab");
@@ -100,9 +118,19 @@ function addCompensator(values) {
 
 function renumber() { compRows().forEach((tr, k) => { tr.querySelector("th").textContent = `G${k + 2}`; }); }
 
+function plantKind() { return $("plant-seesaw").checked ? "seesaw" : "pendulum"; }
+
+// The controller file chosen for the seesaw: its name and text (read in the page, sent with the form).
+let sfFile = null;
+
 function controllerForm() {
+  if (plantKind() === "seesaw") {
+    return { plant: "seesaw", mode: $("sf-mode-file").checked ? "file" : "lqr", q: $("sf-q").value, r: $("sf-r").value,
+      integral: $("sf-integral").checked, file: sfFile || { name: "", text: "" } };
+  }
   const mode = $("mode-pid").checked ? "pid" : "kernel";
   return {
+    plant: "pendulum",
     mode,
     zeros: $("k-zeros").value, poles: $("k-poles").value, gain: $("k-gain").value,
     compensators: compRows().map((tr) => ({
@@ -114,6 +142,7 @@ function controllerForm() {
 
 function readForm() {
   return {
+    plant: plantKind(),
     controller: controllerForm(),
     pendulum: $("pendulum").value, cart: $("cart").value, calibration: $("calibration").value,
     poke: { magnitude: $("poke-mag").value, duration: $("poke-dur").value, start: $("poke-start").value },
@@ -134,7 +163,12 @@ async function checkController() {
   const answer = await api("/api/controller", controllerForm());
   if (serial !== checkSerial) return;  // typed on meanwhile: an older answer must not overwrite
   const el = $("controller-status");
-  if (answer.ok) {
+  if (answer.ok && answer.K) {
+    const poles = answer.closed_loop_poles.map(([re, im]) => (im ? `${re.toPrecision(4)}${im >= 0 ? "+" : "−"}${Math.abs(im).toPrecision(4)}j` : re.toPrecision(4)));
+    setStatus(el, true, `V = −K·[${answer.states.join(", ")}]\n` + answer.states.map((s, k) => `K_${s} = ${Number(answer.K[k].toPrecision(6))}`).join("\n") +
+      `\nclosed-loop poles (linear model): ${poles.join(", ")}`);
+    updateLinear();
+  } else if (answer.ok) {
     setStatus(el, true, `Gc(s) = ${answer.describe}\n` + answer.factors.map((f, k) => `G${k + 1} (${f.label}) = ${f.text}`).join("\n"));
     updateLinear();
   } else {
@@ -151,6 +185,7 @@ const updateLinear = debounce(async () => {
   if (serial !== linearSerial) return;
   const Plotly = await loadPlotly();
   if (!answer.ok) { $("margins").textContent = answer.error; return; }
+  if (answer.seesaw) { drawSeesawPoles(Plotly, answer); return; }
   const traces = answer.branches.map((b, j) => ({ x: b.re, y: b.im, mode: "lines", line: { color: "#1f77b4" }, name: "root locus", showlegend: j === 0 }));
   traces.push({ x: answer.open_poles.re, y: answer.open_poles.im, mode: "markers", marker: { symbol: "x", size: 11, color: "#d62728" }, name: "open-loop poles" });
   traces.push({ x: answer.open_zeros.re, y: answer.open_zeros.im, mode: "markers", marker: { symbol: "circle-open", size: 11, color: "#2ca02c" }, name: "open-loop zeros" });
@@ -185,6 +220,24 @@ const updateLinear = debounce(async () => {
     `; sampled loop with delay: ${answer.sampled_stable ? "stable" : "UNSTABLE"} (max |z| = ${answer.sampled_max_abs_z.toFixed(5)})`;
   $("linear-never").textContent = answer.never ? `Before you run it: ${answer.never}.` : "";
 }, 300);
+
+// The seesaw's state feedback has no single loop to draw a root locus or a Bode plot of: its poles, open and closed.
+function drawSeesawPoles(Plotly, answer) {
+  const [lo, hi, half] = answer.view;
+  Plotly.react("rootlocus", [
+    { x: answer.open_poles.re, y: answer.open_poles.im, mode: "markers", marker: { symbol: "x", size: 11, color: "#d62728" }, name: "open loop (the seesaw alone)" },
+    { x: answer.closed_poles.re, y: answer.closed_poles.im, mode: "markers", marker: { symbol: "square", size: 9, color: answer.stable ? "#ff7f0e" : "#d62728", line: { color: "#000", width: 1 } }, name: "with the state feedback" },
+  ], {
+    title: { text: "poles of the seesaw's linear model", font: { size: 13 }, x: 0.01, xanchor: "left" }, margin: { t: 30, r: 10, b: 40, l: 50 },
+    xaxis: { title: { text: "σ (1/s)" }, range: [lo, hi], zeroline: true }, yaxis: { title: { text: "ω (rad/s)" }, range: [-half, half] },
+    legend: { font: { size: 10 } },
+  }, { responsive: true, displaylogo: false });
+  Plotly.purge("bode");
+  $("bode").innerHTML = "";
+  $("margins").textContent = `the seesaw alone has ${answer.unstable_open_loop_poles} unstable pole(s); a state feedback has no single loop, so no Bode plot or margins`;
+  $("linear-verdict").textContent = answer.stable ? "closed loop stable (continuous linear model)" : "closed loop UNSTABLE (continuous linear model)";
+  $("linear-never").textContent = "";
+}
 
 // ------------------------------------------------------------------------------------ runs
 const runs = new Map();   // id -> {summary, data, shown, color}
@@ -276,35 +329,43 @@ function fmt(v) {
   return String(v);
 }
 
+// The angle of a run: the pendulum's alpha or the seesaw's tilt theta.
+function angleOf(data) { return data.columns.alpha || data.columns.theta; }
+
 async function drawResults() {
   const shown = [...runs.values()].filter((r) => r.shown && r.data);
+  const seesaw = shown.length > 0 && shown.every((r) => r.data.plant === "seesaw");
   drawMetrics(shown);
   drawDownloads();
   drawFrame(0);
   const Plotly = await loadPlotly();
-  const panels = [["alpha", "angle (°)", 180 / Math.PI], ["tip", "tip (cm)", 100], ["x", "cart (cm)", 100], ["voltage", "voltage (V)", 1]];
+  const panels = seesaw ? [["angle", "tilt (°)", 180 / Math.PI], ["x", "cart (cm)", 100], ["voltage", "voltage (V)", 1]]
+    : [["angle", "angle (°)", 180 / Math.PI], ["tip", "tip (cm)", 100], ["x", "cart (cm)", 100], ["voltage", "voltage (V)", 1]];
   const traces = [];
   shown.forEach((run) => {
     const t = run.data.columns.t.map((v) => v - run.data.poke_start);
     panels.forEach(([key, , scale], k) => {
-      const y = run.data.columns[key];
+      const y = key === "angle" ? angleOf(run.data) : run.data.columns[key];
       if (!y) return;
       traces.push({ x: t, y: y.map((v) => v * scale), name: run.data.label, legendgroup: run.summary.id, showlegend: k === 0,
         line: { color: run.color, width: 1.3 }, xaxis: "x", yaxis: k === 0 ? "y" : `y${k + 1}` });
     });
   });
-  const layout = { margin: { t: 30, r: 10, b: 40, l: 60 }, title: { text: "response (time from the poke)", font: { size: 13 }, x: 0.01, xanchor: "left" },
-    grid: { rows: 4, columns: 1, shared_xaxes: true }, legend: { orientation: "h", y: -0.08 }, xaxis: { title: { text: "t − t_poke (s)" } } };
+  const word = seesaw ? "tap" : "poke";
+  const layout = { margin: { t: 30, r: 10, b: 40, l: 60 }, title: { text: `response (time from the ${word})`, font: { size: 13 }, x: 0.01, xanchor: "left" },
+    grid: { rows: panels.length, columns: 1, shared_xaxes: true }, legend: { orientation: "h", y: -0.08 }, xaxis: { title: { text: `t − t_${word} (s)` } } };
+  const share = 1 / panels.length;
   panels.forEach(([, title], k) => {
-    layout[k === 0 ? "yaxis" : `yaxis${k + 1}`] = { title: { text: title }, domain: [1 - (k + 1) * 0.25 + 0.03, 1 - k * 0.25] };
+    layout[k === 0 ? "yaxis" : `yaxis${k + 1}`] = { title: { text: title }, domain: [1 - (k + 1) * share + 0.03, 1 - k * share] };
   });
   Plotly.react("response", traces, layout, { responsive: true, displaylogo: false });
   const zoom = shown.map((run) => ({
-    x: run.data.columns.t.map((v) => v - run.data.poke_start), y: run.data.columns.alpha.map((v) => v * 180 / Math.PI),
+    x: run.data.columns.t.map((v) => v - run.data.poke_start), y: angleOf(run.data).map((v) => v * 180 / Math.PI),
     name: run.data.label, line: { color: run.color },
   }));
-  Plotly.react("zoom", zoom, { title: { text: "angle at the poke (zoom)", font: { size: 13 }, x: 0.01, xanchor: "left" }, margin: { t: 30, r: 10, b: 40, l: 50 },
-    showlegend: false, xaxis: { range: [-0.2, 2.0], title: { text: "t − t_poke (s)" } }, yaxis: { title: { text: "angle (°)" } } },
+  const what = seesaw ? "tilt" : "angle";
+  Plotly.react("zoom", zoom, { title: { text: `${what} at the ${word} (zoom)`, font: { size: 13 }, x: 0.01, xanchor: "left" }, margin: { t: 30, r: 10, b: 40, l: 50 },
+    showlegend: false, xaxis: { range: [-0.2, seesaw ? 4.0 : 2.0], title: { text: `t − t_${word} (s)` } }, yaxis: { title: { text: `${what} (°)` } } },
   { responsive: true, displaylogo: false });
 }
 
@@ -316,7 +377,11 @@ function drawMetrics(shown) {
   head.innerHTML = "<th>metric</th>";
   shown.forEach((run) => { const th = document.createElement("th"); th.style.color = run.color; th.textContent = run.data.label; head.appendChild(th); });
   table.appendChild(head);
-  for (const [key, label, unit] of METRICS) {
+  // The rows of the plants shown: the pendulum's, the seesaw's, or both (each key once).
+  const plants = new Set(shown.map((run) => run.data.plant || "pendulum"));
+  const rows = [...(plants.has("pendulum") ? METRICS : []), ...(plants.has("seesaw") ? SEESAW_METRICS : [])]
+    .filter((row, k, all) => all.findIndex((other) => other[0] === row[0]) === k);
+  for (const [key, label, unit, scale] of rows) {
     const tr = document.createElement("tr");
     tr.innerHTML = `<th>${label}${unit ? " (" + unit + ")" : ""}</th>`;
     shown.forEach((run) => {
@@ -324,7 +389,7 @@ function drawMetrics(shown) {
       const value = run.data.metrics[key];
       td.dataset.run = run.summary.id; td.dataset.key = key;
       td.dataset.value = value === undefined ? "" : JSON.stringify(value);
-      td.textContent = fmt(value);
+      td.textContent = fmt(typeof value === "number" && scale ? value * scale : value);
       const why = (run.data.metrics.not_reported || {})[key];
       if (why) { td.title = why; td.textContent += " *"; }
       if (key === "verdict" && value) td.className = value.clean ? "ok" : value.outcome === "balanced" ? "warn" : "error";
@@ -338,7 +403,7 @@ function drawMetrics(shown) {
   shown.forEach((run) => {
     const reasons = run.data.metrics.not_reported || {};
     new Set(Object.values(reasons)).forEach((why) => {
-      const keys = Object.keys(reasons).filter((k) => reasons[k] === why).map((k) => (METRICS.find((m) => m[0] === k) || [k, k])[1]);
+      const keys = Object.keys(reasons).filter((k) => reasons[k] === why).map((k) => (rows.find((m) => m[0] === k) || [k, k])[1]);
       const line = document.createElement("div");
       line.textContent = `* ${run.data.label}: ${keys.join(", ")} not reported: ${why}`;
       notes.appendChild(line);
@@ -377,6 +442,7 @@ function drawFrame(i) {
   const ctx = canvas.getContext("2d");
   ctx.clearRect(0, 0, canvas.width, canvas.height);
   if (!run || !run.data) return;
+  if (run.data.plant === "seesaw") { drawSeesaw(ctx, canvas, run.data.columns, i); return; }
   const c = run.data.columns;
   const scale = 400;  // px per m: the track is about +-0.5 m
   const x0 = canvas.width / 2, y0 = canvas.height - 50;
@@ -389,6 +455,26 @@ function drawFrame(i) {
   ctx.strokeStyle = "#c33"; ctx.lineWidth = 5;
   ctx.beginPath(); ctx.moveTo(cx, y0); ctx.lineTo(cx + L * Math.sin(alpha), y0 - L * Math.cos(alpha)); ctx.stroke();
   $("anim-time").textContent = `t = ${c.t[i].toFixed(2)} s, angle ${(alpha * 180 / Math.PI).toFixed(2)}°`;
+}
+
+// The seesaw as pendulab.analysis.animation.animate_seesaw draws it: the track 0.125 m above the pivot, tilted by theta
+// (positive: the +x end up), the cart on it at x.
+function drawSeesaw(ctx, canvas, c, i) {
+  const scale = 400, height = 0.125, half = 0.45;
+  const px = canvas.width / 2, py = canvas.height - 60;
+  const theta = c.theta[i], x = c.x ? c.x[i] : 0;
+  const at = (s, h) => [px + scale * (s * Math.cos(theta) - h * Math.sin(theta)), py - scale * (s * Math.sin(theta) + h * Math.cos(theta))];
+  ctx.fillStyle = "#888";
+  ctx.beginPath(); ctx.moveTo(px, py); ctx.lineTo(px - 20, py + 40); ctx.lineTo(px + 20, py + 40); ctx.closePath(); ctx.fill();
+  ctx.strokeStyle = "#555"; ctx.lineWidth = 4;
+  ctx.beginPath(); ctx.moveTo(px, py); ctx.lineTo(...at(0, height)); ctx.stroke();
+  ctx.strokeStyle = "#345"; ctx.lineWidth = 5;
+  ctx.beginPath(); ctx.moveTo(...at(-half, height)); ctx.lineTo(...at(half, height)); ctx.stroke();
+  const [cx, cy] = at(x, height + 0.03);
+  ctx.save(); ctx.translate(cx, cy); ctx.rotate(-theta);
+  ctx.fillStyle = "#c33"; ctx.fillRect(-22, -10, 44, 20);
+  ctx.restore();
+  $("anim-time").textContent = `t = ${c.t[i].toFixed(2)} s, tilt ${(theta * 180 / Math.PI).toFixed(2)}°, cart ${(x * 100).toFixed(1)} cm`;
 }
 
 function play() {
@@ -450,6 +536,52 @@ function fillDemo() {
   checkController();
 }
 
+function fillSeesawDemo() {
+  $("sf-mode-lqr").checked = true; sfModeChanged();
+  $("sf-q").value = "1000,5000,0,0,2000"; $("sf-r").value = "0.5"; $("sf-integral").checked = true; integralChanged();
+}
+
+function sfModeChanged() {
+  const file = $("sf-mode-file").checked;
+  $("sf-file-entry").hidden = !file; $("sf-lqr-entry").hidden = file;
+  controllerChanged();
+}
+
+function integralChanged() {
+  $("sf-states").textContent = $("sf-integral").checked ? "x, θ, ẋ, θ̇, ∫θ" : "x, θ, ẋ, θ̇";
+  controllerChanged();
+}
+
+function readControllerFile() {
+  const file = $("sf-file").files[0];
+  if (!file) { sfFile = null; controllerChanged(); return; }
+  if (file.size > MAX_UPLOAD) {
+    sfFile = null;
+    setStatus($("controller-status"), false, `${file.name} is ${(file.size / 1e6).toFixed(1)} MB; a controller file is a few hundred bytes: is it the right file?`);
+    return;
+  }
+  const reader = new FileReader();
+  reader.onload = () => { sfFile = { name: file.name, text: String(reader.result) }; checkController(); };
+  reader.onerror = () => { sfFile = null; setStatus($("controller-status"), false, `${file.name} could not be read`); };
+  reader.readAsText(file);
+}
+
+// The plant chosen: the controller entry, the plant's fields and the disturbance's words and defaults follow it.
+function plantChanged() {
+  const kind = plantKind();
+  const seesaw = kind === "seesaw";
+  $("tf-controller").hidden = seesaw; $("sf-controller").hidden = !seesaw;
+  ["pendulum-label", "cart-label", "recentre-label", "swing-up-label"].forEach((id) => { $(id).hidden = seesaw; });
+  const [word, magnitude, duration] = DISTURBANCE[kind];
+  const [, otherMagnitude, otherDuration] = DISTURBANCE[seesaw ? "pendulum" : "seesaw"];
+  document.querySelectorAll(".disturbance").forEach((el) => { el.textContent = word; });
+  // The other plant's defaults become this one's; typed values stay.
+  if ($("poke-mag").value === otherMagnitude) $("poke-mag").value = magnitude;
+  if ($("poke-dur").value === otherDuration) $("poke-dur").value = duration;
+  $("bode").dataset.hint = seesaw ? "a state feedback has no single loop: no Bode plot" : "and the Bode plot of the loop here";
+  checkController();
+}
+
 function modeChanged() {
   const pid = $("mode-pid").checked;
   $("pid-entry").hidden = !pid; $("kernel-entry").hidden = pid;
@@ -472,6 +604,12 @@ async function restoreRuns() {
 function init() {
   ["k-zeros", "k-poles", "k-gain", "pid-kp", "pid-ki", "pid-kd", "pid-pole"].forEach((id) => $(id).addEventListener("input", controllerChanged));
   ["mode-kernel", "mode-pid"].forEach((id) => $(id).addEventListener("change", modeChanged));
+  ["plant-pendulum", "plant-seesaw"].forEach((id) => $(id).addEventListener("change", plantChanged));
+  ["sf-mode-lqr", "sf-mode-file"].forEach((id) => $(id).addEventListener("change", sfModeChanged));
+  ["sf-q", "sf-r"].forEach((id) => $(id).addEventListener("input", controllerChanged));
+  $("sf-integral").addEventListener("change", integralChanged);
+  $("sf-file").addEventListener("change", readControllerFile);
+  $("sf-demo").onclick = fillSeesawDemo;
   ["pendulum", "cart", "calibration", "method", "delay", "step"].forEach((id) => $(id).addEventListener("change", updateLinear));
   $("add-comp").onclick = () => addCompensator();
   $("demo").onclick = fillDemo;
