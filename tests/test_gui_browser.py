@@ -428,6 +428,8 @@ def test_the_seesaw_chosen_its_controller_entry_run_and_drawing(gui):
     run = scipy.io.loadmat(folder / "run.mat")
     assert max(map(abs, tilt)) == pytest.approx(np.degrees(np.abs(run["theta"]).max()), rel=1e-9)
     shown = page_metrics(d, run_id)
+    assert shown["verdict"][0] == "held" and "final_value_rad" not in shown  # the seesaw's rows, not the pendulum's
+    assert "natural_frequency_rad_s" in shown and "tip" not in d.execute_script("return Object.keys(runs.get(current).data.columns)")
     assert shown["peak_tilt_rad"][1] == metrics["peak_tilt_rad"]
     assert math.isclose(float(shown["peak_tilt_rad"][0]), math.degrees(metrics["peak_tilt_rad"]), rel_tol=6e-4)
     assert float(shown["tilt_settling_time_s"][0]) == pytest.approx(metrics["tilt_settling_time_s"], rel=6e-4)

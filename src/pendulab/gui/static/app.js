@@ -323,7 +323,10 @@ async function openFolder() {
 // ------------------------------------------------------------------------------------ results
 function fmt(v) {
   if (v === null || v === undefined) return "n/a";
-  if (typeof v === "object" && v.outcome) return v.outcome + (v.warnings.length ? ` (${v.warnings.map((w) => w.kind).join(", ")})` : "");
+  if (typeof v === "object" && v.outcome) {
+    const outcome = v.plant === "seesaw" && v.outcome === "balanced" ? "held" : v.outcome;  // the seesaw is held, not balanced
+    return outcome + (v.warnings.length ? ` (${v.warnings.map((w) => w.kind).join(", ")})` : "");
+  }
   if (typeof v === "boolean") return v ? "yes" : "no";
   if (typeof v === "number") return Number(v.toPrecision(4)).toString();
   return String(v);
