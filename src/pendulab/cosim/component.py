@@ -164,10 +164,21 @@ class Component:
     def setup(self, start_time: float, values: Mapping[str, Any] | None = None, *, stop_time: float | None = None) -> None:
         """Set the start values (with ``values`` on top) and initialize at ``start_time``."""
         self.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
+        # One call per base type (a sweep sets some 60 start values per run), in the order given.
+        batches: dict[str, tuple[list[int], list[Any]]] = {"Real": ([], []), "Integer": ([], []), "Boolean": ([], [])}
+        for variable, value in {**self.start_values, **(values or {})}.items():
+            v = self.variable(variable)
+            kind = "Integer" if v.type == "Enumeration" else v.type
+            if kind not in batches:
+                raise UserError(f"variable {self.name}.{variable} of type {v.type} cannot be set by the master")
+            batches[kind][0].append(v.valueReference)
+            batches[kind][1].append({"Real": float, "Integer": int, "Boolean": bool}[kind](value))
+        setters = {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger, "Boolean": self.fmu.setBoolean}
         try:
             # A start value outside its variable's range is refused here, with the FMU's log line naming it.
-            for variable, value in {**self.start_values, **(values or {})}.items():
-                self.set_value(variable, value)
+            for kind, (refs, numbers) in batches.items():
+                if refs:
+                    setters[kind](refs, numbers)
             self.fmu.enterInitializationMode()
             self.fmu.exitInitializationMode()
         except UserError:
