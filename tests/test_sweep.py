@@ -81,11 +81,17 @@ def test_a_reset_instance_runs_as_a_fresh_one(loop_fmus):
     spec = parse_sweep_spec(SPEC)
     runs = list(runs_of(spec))
     assert runs[3][3]["delay"] != runs[12][3]["delay"]
+    # A later run with run 12's wiring (its delay) on another rig: the master reuses its plan and log buffers.
+    later = next(r for r in runs if r[3]["delay"] == runs[12][3]["delay"] and r[3]["F1"] != runs[12][3]["F1"])
     with Simulator() as sim:
         pendulab.simulate(spec.run_spec(runs[3][3]), simulator=sim)  # another controller gain, rig and delay first
         again = pendulab.simulate(spec.run_spec(runs[12][3]), simulator=sim)
+        reused = pendulab.simulate(spec.run_spec(later[3]), simulator=sim)
     fresh = pendulab.simulate(spec.run_spec(runs[12][3]))
     assert all(np.array_equal(again.columns[k], fresh.columns[k]) for k in fresh.columns)
+    fresh_later = pendulab.simulate(spec.run_spec(later[3]))
+    assert all(np.array_equal(reused.columns[k], fresh_later.columns[k]) for k in fresh_later.columns)
+    assert not np.array_equal(reused.columns["x"], again.columns["x"])  # another rig, not the last run's buffers
     with BatchRunner() as runner:
         runner.run(spec, *runs[3])
         row = runner.run(spec, *runs[12])

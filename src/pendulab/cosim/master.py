@@ -53,6 +53,8 @@ class Master:
             raise UserError("the system has no components")
         self.system = system
         self.instances: dict[str, Component] = {}
+        # The last run's plan and what it was built for: runs of the same wiring reuse it (a sweep's do).
+        self._plan: tuple[Any, _Plan] | None = None
         try:
             for name, component in system.components.items():
                 self.instances[name] = Component(name, component.fmu, component.start_values)
@@ -68,6 +70,7 @@ class Master:
         self.close()
 
     def close(self) -> None:
+        self._plan = None
         for instance in self.instances.values():
             instance.close()
         self.instances.clear()
@@ -206,9 +209,16 @@ class Master:
             # FMI 2.0 allows only inputs and tunable parameters to change during the run.
             if variable.causality != "input" and not (variable.causality == "parameter" and variable.variability == "tunable"):
                 raise UserError(f"event target {event.target!r} is a {variable.variability} {variable.causality}; an event sets an input")
-        self._check_wiring(record)
+        # The plan depends on the wiring (delays included), what is recorded and the number of steps, on nothing
+        # a run sets (start values, events): a run like the last one reuses it, its log rows overwritten.
+        key = (tuple(self.system.connections), tuple(record), n_steps)
+        if self._plan is None or self._plan[0] != key:
+            self._plan = None
+            self._check_wiring(record)
         self.initialize(start_time, stop_time)
-        plan = _Plan(self, n_steps, record)
+        if self._plan is None:
+            self._plan = (key, _Plan(self, n_steps, record))
+        plan = self._plan[1]
         time = start_time + h * np.arange(n_steps + 1)
         reset_after_step: list[tuple[Component, str, Any]] = []
         phase_a, late, recorders, steps = plan.phase_a, plan.late, plan.recorders, plan.steps
@@ -331,6 +341,7 @@ class _Plan:
         order = list(master.instances)
         position = {name: k for k, name in enumerate(order)}
         self._keep: list[Any] = []  # ctypes objects whose addresses the plan uses
+        self._native: tuple[Any, list[str]] | None = None
         self._labels: dict[int, str] = {}
         self._logs: dict[tuple[str, str], tuple[np.ndarray, list[str]]] = {}
         self._record = list(record)
@@ -421,7 +432,12 @@ class _Plan:
             self.steps.append((name, f, master.instances[name].handle))
 
     def native_ops(self) -> tuple[Any, list[str]]:
-        """The plan as an array of :class:`_Op` (and a label per operation for error messages)."""
+        """The plan as an array of :class:`_Op` (and a label per operation for error messages); built once."""
+        if self._native is None:
+            self._native = self._native_ops()
+        return self._native
+
+    def _native_ops(self) -> tuple[Any, list[str]]:
         ops: list[_Op] = []
         labels: list[str] = []
 
