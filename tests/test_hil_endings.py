@@ -63,13 +63,15 @@ class ScriptedLink:
     """A rig link that plays samples (cart creeping one count each) and then an ending: a status flag on the last
     sample, silence with a cause, or a tick that goes back."""
 
-    def __init__(self, samples: int, *, status: int = 0, silence: Exception | None = None, tick_back: bool = False) -> None:
+    def __init__(self, samples: int, *, status: int = 0, silence: Exception | None = None, tick_back: bool = False,
+                 read_error: Exception | None = None) -> None:
         from pendulab.hil import protocol as P
 
         self.P = P
         self.identity = P.Identity(0, boot_id=1)
         self.name, self.delay = "scripted", 1
         self.samples, self.status, self.silence, self.tick_back = samples, status, silence, tick_back
+        self.read_error = read_error
         self.k = 0
         self.motor_offs = 0
 
@@ -78,6 +80,8 @@ class ScriptedLink:
         self.k += 1
         if k < self.samples:
             return P.Sample(k & 0xFFFF, tick=100 + k, cart=k // 10, voltage_mv=500), 0.0
+        if self.read_error is not None:
+            raise self.read_error
         if self.silence is not None:
             return None
         tick = 50 if self.tick_back else 100 + k
@@ -102,6 +106,7 @@ class ScriptedLink:
     ({"silence": "restart"}, "the rig restarted (boot id 0x00000001 -> 0x00000002)"),
     ({"tick_back": True}, "the rig restarted (its tick went back"),
     ({"silence": "lost"}, "link lost"),
+    ({"read_error": "closed"}, "link lost: reading from scripted failed"),  # the port closed (it was a traceback)
 ])
 def test_every_rig_ending_keeps_the_streamed_log_to_its_last_sample(tmp_path, ending, words):
     from pendulab.analysis.results import RunLog
@@ -113,14 +118,15 @@ def test_every_rig_ending_keeps_the_streamed_log_to_its_last_sample(tmp_path, en
     assert (P.ST_FAULT, P.ST_WATCHDOG) == (0x08, 0x02)
     silence = {"restart": RigRestarted("the rig restarted (boot id 0x00000001 -> 0x00000002)"),
                "lost": LinkLost("link lost: no data from the rig for 550 ms")}.get(ending.pop("silence", None))
-    link = ScriptedLink(400, silence=silence, **ending)
+    read_error = LinkLost("link lost: reading from scripted failed (read failed: [Errno 5] Input/output error)") if ending.pop("read_error", None) else None
+    link = ScriptedLink(400, silence=silence, read_error=read_error, **ending)
     log_file = tmp_path / "log.csv"
     stream = RunLog(log_file, LOG_COLUMNS, flush_every=10)
     with HilRig(link, log=stream) as rig:  # type: ignore[arg-type]
         log = run_ramp_test(rig, iterations=2)
     stream.close()
     assert log.interrupted and words in log.end_reason and log.iterations_done == 0, log.end_reason
-    assert "link lost" not in log.end_reason or words == "link lost"
+    assert "link lost" not in log.end_reason or words.startswith("link lost")
     kept = read_log(log_file)
     # Every sample that arrived is in the log, the one that carried the ending too.
     last = 100 + 400 if (ending.get("status") and not ending.get("tick_back")) else 100 + 399

@@ -371,12 +371,16 @@ class RigEmulator:
             cmd = self.ring[want % RING]
             if (cmd is None or cmd.answers != want) and self._clock is not None:
                 # This process, not a rig's timer, may have sent that sample late (an OS scheduling
-                # delay): the host gets its full N periods from when the sample really went out.
+                # delay): the host gets its full N periods from when the sample really went out. What
+                # arrived by then is read even if this process itself was not running at the deadline.
                 deadline = self.sent_at[-self.delay] + self.delay * self.o.period
-                while self._clock() < deadline and (cmd is None or cmd.answers != want):
-                    for frame in self._receive(self._clock()):
-                        self._handle(frame, self._clock())
+                while True:
+                    at = self._clock()
+                    for frame in self._receive(at):
+                        self._handle(frame, at)
                     cmd = self.ring[want % RING]
+                    if (cmd is not None and cmd.answers == want) or at >= deadline:
+                        break
             if cmd is not None and cmd.answers == want:
                 due = cmd
             else:
@@ -497,7 +501,10 @@ class RigEmulator:
                 # This process did not run (the OS gave the core to others): a rig's timer never stops,
                 # and the host had no sample to answer meanwhile, so that time does not count against
                 # the host in the watchdog (a 90 ms stall of this emulator on a loaded host tripped it).
+                # Every stall counts alike, wherever this process was held (sleeping here or in the tick).
                 self.last_command_time += overslept - period
+            if overslept > 0.05:  # suspended (debugger, overload): do not race to catch up
+                next_tick = t0 + now
             if duration is not None and now >= duration:
                 return "duration"
             since = None if self.connected_at is None else now - self.connected_at
@@ -546,6 +553,4 @@ class RigEmulator:
             self.plant.step(self.voltage)
             k += 1
             next_tick += period
-            if time.perf_counter() - next_tick > 0.05:  # suspended (debugger, overload): do not race to catch up
-                next_tick = time.perf_counter()
         return "stopped"

@@ -13,6 +13,8 @@ Examples
 
 from __future__ import annotations
 
+import os
+import select
 import time
 from collections import deque
 from typing import Any
@@ -22,6 +24,11 @@ from pendulab.hil import protocol as P
 
 #: Tries of a set-up request (CONFIGURE, ZERO, STREAM on) whose acknowledgement does not come.
 REQUEST_TRIES = 3
+
+#: A write fails only when the port takes no byte for this long (s). The rig reads a frame every period, so a
+#: full output buffer means its other end is briefly not reading (a pseudo-terminal's peer or the kernel's
+#: worker not scheduled on a loaded host); the rig's watchdog, not this, judges whether answers came in time.
+WRITE_STALL = 2.0
 
 
 class LinkLost(Exception):
@@ -65,13 +72,14 @@ class RigLink:
         self.identity: P.Identity | None = None
         self._frames: deque[tuple[P.Frame, float]] = deque()
         self.bytes_in = 0
+        self._fd = _writable_fd(serial_port)
 
     @classmethod
     def open(cls, port: str, baud: int = P.DEFAULT_BAUD) -> "RigLink":
         import serial
 
         try:
-            handle = serial.serial_for_url(port, baudrate=baud, timeout=0.05, write_timeout=0.5, do_not_open=True)
+            handle = serial.serial_for_url(port, baudrate=baud, timeout=0.05, write_timeout=WRITE_STALL, do_not_open=True)
             if hasattr(handle, "exclusive") and not port.startswith(("socket://", "loop://", "rfc2217://")):
                 try:
                     handle.exclusive = True  # two programs on one rig would fight over the motor
@@ -103,7 +111,10 @@ class RigLink:
         frame = frame_type(self.seq, **fields)
         self.seq = (self.seq + 1) & 0xFFFF
         try:
-            self.port.write(P.encode(frame))
+            if self._fd is None:
+                self.port.write(P.encode(frame))  # pyserial's own write (Windows: it waits for the bytes to be taken)
+            else:
+                _write_all(self._fd, P.encode(frame))
         except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError, ...
             raise LinkLost(f"link lost: writing to {self.name} failed ({exc})") from None
 
@@ -122,14 +133,18 @@ class RigLink:
                 self._frames.append((frame, now))
 
     def next_frame(self, timeout: float) -> tuple[P.Frame, float] | None:
-        """The next valid frame and the time (perf_counter) its last byte was read, or None after ``timeout``."""
+        """The next valid frame and the time (perf_counter) its last byte was read, or None after ``timeout``.
+
+        What has already arrived is always read before giving up: a host that was not scheduled past its
+        deadline (a loaded machine) must not take the rig's waiting samples for silence.
+        """
         deadline = time.perf_counter() + timeout
         while not self._frames:
             left = deadline - time.perf_counter()
+            self._pump(max(left, 0.0))
             if left <= 0:
-                return None
-            self._pump(left)
-        return self._frames.popleft()
+                break
+        return self._frames.popleft() if self._frames else None
 
     def next_sample(self, timeout: float) -> tuple[P.Sample, float] | None:
         """The next SAMPLE (other frames in between are dropped), or None after ``timeout``."""
@@ -271,6 +286,42 @@ class RigLink:
                 action()
             except (LinkLost, Exception):  # noqa: BLE001
                 pass
+
+
+def _writable_fd(port: Any) -> int | None:
+    """The port's non-blocking file descriptor where the host writes to it itself (POSIX), else None.
+
+    pyserial's POSIX write with a write timeout fails a write whose bytes the kernel has all taken when the
+    buffer is full just after it (it then waits for room), and gives up after the timeout even while the
+    other end is only briefly not reading: measured on a pseudo-terminal, "Write timeout" raised for a frame
+    that its peer then read. Windows' write waits for the bytes to be taken, as wanted.
+    """
+    if os.name != "posix":
+        return None
+    try:
+        fd = port.fileno()
+        return fd if isinstance(fd, int) and not os.get_blocking(fd) else None
+    except Exception:  # noqa: BLE001 - a port without a file descriptor (loop://): pyserial writes
+        return None
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    """Write every byte; OSError when the port took no byte for :data:`WRITE_STALL` s."""
+    view = memoryview(data)
+    last_progress = time.perf_counter()
+    while view:
+        try:
+            n = os.write(fd, view)
+        except BlockingIOError:
+            n = 0
+        if n:
+            view = view[n:]
+            last_progress = time.perf_counter()
+            continue
+        left = last_progress + WRITE_STALL - time.perf_counter()
+        if left <= 0:
+            raise OSError(f"the port took no byte for {WRITE_STALL:g} s: the rig stopped reading")
+        select.select([], [fd], [], min(left, 0.05))
 
 
 class Encoders:

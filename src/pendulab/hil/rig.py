@@ -52,7 +52,10 @@ class HilRig(Rig):
 
     def _sample(self) -> tuple[P.Sample, float]:
         """The next sample, logged, and the cart's position; :class:`RigEnded` when the rig ended the test."""
-        item = self.link.next_sample(SAMPLE_TIMEOUT)
+        try:
+            item = self.link.next_sample(SAMPLE_TIMEOUT)
+        except LinkLost as exc:  # the port itself failed (closed, unplugged): an ending like the others
+            raise RigEnded(str(exc)) from None
         if item is None:
             cause = self.link.silence_cause(SAMPLE_TIMEOUT * 1e3)
             raise RigEnded(str(cause) if isinstance(cause, RigRestarted) else f"{cause} (no sample from {self.link.name})")
