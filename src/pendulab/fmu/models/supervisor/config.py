@@ -77,6 +77,7 @@ RECENTRE_X_OFF = 0.02
 RECENTRE_GAIN = 0.2
 RECENTRE_R_MAX = 0.005
 RECENTRE_SLEW = 0.05
+RECENTRE_LEAD = 0.0
 #: Swing-up (Quanser's self-erecting pendulum): the catch window and the set point's speed limit.
 CATCH_X = 0.20
 #: Quanser's window allows 15 deg; the hand-over waits until 6 deg, from where a tip-only loop such as the demo
@@ -188,7 +189,7 @@ def spec() -> ModelSpec:
 #: Ranges of the re-centring and swing-up parameters (the FMU refuses a value set outside them).
 MODE_RANGES: dict[str, tuple[float, float]] = {
     "recentre_x_on": (0.0, 10.0), "recentre_x_off": (0.0, 10.0), "recentre_gain": (-100.0, 100.0),
-    "recentre_r_max": (0.0, 1.0), "recentre_slew": (1e-6, 10.0), "pendulum_frequency": (1e-3, 1e3),
+    "recentre_r_max": (0.0, 1.0), "recentre_slew": (1e-6, 10.0), "recentre_lead": (0.0, 10.0), "pendulum_frequency": (1e-3, 1e3),
     "swing_energy_gain": (0.0, 1e4), "swing_energy_target": (-2.0, 2.0), "swing_accel_max": (0.0, 100.0),
     "swing_speed_max": (1e-6, 10.0), "swing_travel": (1e-6, 10.0), "swing_centring": (0.0, 100.0),
     "swing_kp": (0.0, 1e4), "swing_kd": (0.0, 1e3), "swing_kff": (0.0, 1e3), "swing_V_limit": (1e-3, 1e3),
@@ -217,6 +218,7 @@ def _mode_variables() -> list[Variable]:
         real("recentre_gain", RECENTRE_GAIN, "m/m", "Re-centring's outer loop: r = recentre_gain * x_measured while engaged"),
         real("recentre_r_max", RECENTRE_R_MAX, "m", "Largest |r| re-centring applies"),
         real("recentre_slew", RECENTRE_SLEW, "m/s", "Largest rate of change of r"),
+        real("recentre_lead", RECENTRE_LEAD, "s", "Re-centring acts on the cart position predicted this far ahead from its speed, x + lead * dx/dt (0: the measured position)"),
         real("pendulum_frequency", math.sqrt(0.230 * 9.81 * 0.3302 / (7.884e-3 + 0.230 * 0.3302**2)), "rad/s",
              "Small-swing frequency of the hanging pendulum, sqrt(Mp*g*lp/(Ip+Mp*lp^2)): scales the energy"),
         real("swing_energy_gain", 60.0, "m/s2", "Swing-up law: cart acceleration per unit of missing energy (Astrom-Furuta)"),

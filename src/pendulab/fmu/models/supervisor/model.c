@@ -325,9 +325,10 @@ static void swing(Instance *comp, Memory *m, double alpha, double dt) {
     }
 }
 
-/* Re-centring: r follows the cart (r = gain * x) while engaged, else returns to 0, never faster than the slew. */
+/* Re-centring: r follows the cart (r = gain * x) while engaged, else returns to 0, never faster than the slew.
+ * x is the cart's position predicted recentre_lead ahead from its speed (0: the measured position). */
 static void recentre(Instance *comp, Memory *m, double t, double dt, int log) {
-    double x = comp->r[VR_x_measured], target = 0.0, step;
+    double x = comp->r[VR_x_measured] + comp->r[VR_recentre_lead] * m->xdot, target = 0.0, step;
     if (!isfinite(x)) return;
     if (!m->recentring && fabs(x) > comp->r[VR_recentre_x_on]) {
         m->recentring = 1;
