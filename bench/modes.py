@@ -78,6 +78,10 @@ def run_with(spec: RunSpec, **supervisor: float) -> dict[str, np.ndarray]:
         return master.run(spec.timing.stop_time, list(RECORD))
 
 
+def _seconds(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f} s"
+
+
 def cut_of(log: dict[str, np.ndarray]) -> float | None:
     t = float(log["supervisor.trip_time"][-1])
     return None if t < 0 else t
@@ -112,17 +116,20 @@ def recentre_section() -> list[dict]:
             print(f"{name:<16} {delay:>2} {f(row['cut_without_s']):>11} {f(row['cut_with_s']):>9} {row['max_x_without_m']:>11.3f} "
                   f"{row['max_x_with_m']:>9.3f} {row['nrmse_pct']:>8.2f} {f(row['settling_without_s']):>10} "
                   f"{f(row['settling_with_s']):>11} {f(row['recentre_time_s'], '{:.1f}'):>8} {f(row['cart_speed_after_poke_m_s'], '{:+.2f}'):>9}")
-    print("\nThe PIDs with re-centring far stronger than the default (r up to 5 mm at 0.05 m/s): the cut time, delay 0")
+    print("\nThe PIDs with re-centring far stronger than the default (r up to 5 mm at 0.05 m/s): the cut time in 10 s, delay 0")
     strong = [(0.005, 0.05), (0.02, 0.5), (0.05, 1.0), (0.2, 2.0)]
     for name, controller in list(controllers().items())[1:]:
-        spec = RunSpec(controller, poke=BIG_POKE, timing=Timing(stop_time=5.0), supervisor=Supervisor(recentre=True))
+        spec = RunSpec(controller, poke=BIG_POKE, timing=Timing(stop_time=10.0), supervisor=Supervisor(recentre=True))
         cuts = []
         for r_max, slew in strong:
             log = run_with(spec, recentre_r_max=r_max, recentre_slew=slew, recentre_x_on=0.03)
+            ref = pendulab.simulate(spec.replace(supervisor=Supervisor())).columns["alpha"]
             cuts.append({"r_max_m": r_max, "slew_m_s": slew, "cut_s": cut_of(log),
-                         "reason": TRIP_REASONS[int(log["supervisor.trip_reason"][-1])], "max_abs_r_m": float(np.abs(log["supervisor.r"]).max())})
+                         "reason": TRIP_REASONS[int(log["supervisor.trip_reason"][-1])], "max_abs_r_m": float(np.abs(log["supervisor.r"]).max()),
+                         "nrmse_pct": first_second_nrmse(log["time"], log["plant.alpha"], ref)})
         rows.append({"controller": name, "strong_recentring": cuts})
-        print(f"  {name:<16} " + "  ".join(f"|r|<={c['r_max_m'] * 1e3:g} mm @{c['slew_m_s']:g} m/s: cut {c['cut_s']} ({c['reason']})" for c in cuts))
+        print(f"  {name:<16} " + "  ".join(f"|r|<={c['r_max_m'] * 1e3:g} mm @{c['slew_m_s']:g} m/s: cut {_seconds(c['cut_s'])} ({c['reason']}), NRMSE {c['nrmse_pct']:.0f} %"
+                                        for c in cuts))
     return rows
 
 
@@ -194,43 +201,57 @@ def swing_section() -> list[dict]:
     return rows
 
 
-def lab_section() -> list[dict]:
+#: lab's endings that are the host's or the link's (a loaded machine), not the modes': such a session is run again.
+LINK_ENDINGS = ("watchdog tripped", "link lost", "the link is too slow")
+
+
+def lab_section(tries: int = 3) -> list[dict]:
     print("\n== lab --swing-up --recentre against the emulator and the firmware twin (real time) ==")
-    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
     rows = []
     for rig, args in (("emulator", []), ("firmware twin", ["--firmware"])):
-        with tempfile.TemporaryDirectory() as folder:
-            emu = subprocess.Popen([sys.executable, "-m", "pendulab", "rig-emulator", *args], stdout=subprocess.PIPE,
-                                   stderr=subprocess.DEVNULL, text=True, env=env)
-            try:
-                port = emu.stdout.readline().strip()  # type: ignore[union-attr]
-                out = Path(folder) / "lab"
-                started = os.times()
-                lab = subprocess.run([sys.executable, "-m", "pendulab", "lab", "--port", port, "--demo", "--swing-up", "--recentre",
-                                      "--delay", "4", "--stop-time", "17", "--out", str(out)], input="s\n", capture_output=True,
-                                     text=True, env=env, timeout=120)
-            finally:
-                emu.terminate()
-                emu.wait(10)
-            ending = (lab.stdout.strip().splitlines() or ["?"])[-1]
-            ended = os.times()  # (the children's CPU: lab and the rig; 0 on Windows)
-            cpu = ended.children_user + ended.children_system - started.children_user - started.children_system
-            row: dict = {"rig": rig, "status": lab.returncode, "ending": ending, "children_cpu_s": cpu}
-            metrics_file = out / "metrics.json"
-            if metrics_file.is_file():
-                m = json.loads(metrics_file.read_text())
-                log = np.genfromtxt(out / "rig_log.csv", delimiter=",", names=True)
-                catch = m.get("catch_time_s")
-                held = 0.0
-                if catch is not None:
-                    after = log["t"] >= catch
-                    held = float(log["t"][-1] - catch) if np.all(log["supervisor_state"][after] == RUNNING) else 0.0
-                row.update(catch_time_s=catch, max_x_m=m.get("max_abs_x_m"), missed=m.get("missed_catches"), held_s=held,
-                           end_reason=m.get("end_reason"))
+        for attempt in range(1, tries + 1):
+            row = _lab_session(rig, args)
+            row["attempt"] = attempt
             rows.append(row)
-            print(f"{rig}: exit {lab.returncode}, caught at {row.get('catch_time_s')} s, largest |x| {row.get('max_x_m')}, "
-                  f"{row.get('missed')} missed, held {row.get('held_s', 0):.1f} s; {ending}")
+            if row["status"] == 0 or not any(words in row["ending"] for words in LINK_ENDINGS):
+                break
     return rows
+
+
+def _lab_session(rig: str, args: list[str]) -> dict:
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
+    with tempfile.TemporaryDirectory() as folder:
+        emu = subprocess.Popen([sys.executable, "-m", "pendulab", "rig-emulator", *args], stdout=subprocess.PIPE,
+                               stderr=subprocess.DEVNULL, text=True, env=env)
+        try:
+            port = emu.stdout.readline().strip()  # type: ignore[union-attr]
+            out = Path(folder) / "lab"
+            started = os.times()
+            lab = subprocess.run([sys.executable, "-m", "pendulab", "lab", "--port", port, "--demo", "--swing-up", "--recentre",
+                                  "--delay", "4", "--stop-time", "17", "--out", str(out)], input="s\n", capture_output=True,
+                                 text=True, env=env, timeout=120)
+        finally:
+            emu.terminate()
+            emu.wait(10)
+        ending = (lab.stdout.strip().splitlines() or ["?"])[-1]
+        ended = os.times()  # (the children's CPU: lab and the rig)
+        cpu = ended.children_user + ended.children_system - started.children_user - started.children_system
+        row: dict = {"rig": rig, "status": lab.returncode, "ending": ending, "children_cpu_s": cpu}
+        metrics_file = out / "metrics.json"
+        if metrics_file.is_file():
+            m = json.loads(metrics_file.read_text())
+            log = np.genfromtxt(out / "rig_log.csv", delimiter=",", names=True)
+            catch = m.get("catch_time_s")
+            held = 0.0
+            if catch is not None:
+                after = log["t"] >= catch
+                held = float(log["t"][-1] - catch) if np.all(log["supervisor_state"][after] == RUNNING) else 0.0
+            row.update(catch_time_s=catch, max_x_m=m.get("max_abs_x_m"), missed=m.get("missed_catches"), held_s=held,
+                       end_reason=m.get("end_reason"))
+        print(f"{rig}: exit {lab.returncode}, caught at {row.get('catch_time_s')} s, largest |x| {row.get('max_x_m')}, "
+              f"{row.get('missed')} missed, held {row.get('held_s', 0):.1f} s; {ending.split('; ended: ')[-1]}; "
+              f"load average {os.getloadavg()[0]:.1f}")
+        return row
 
 
 SECTIONS = {"recentre": recentre_section, "law": law_section, "catch": catch_section, "swing": swing_section}
