@@ -86,6 +86,19 @@ def test_the_tilt_s_margin_is_three_quarters_of_its_limit(peak_deg: float, warne
         assert v.clean
 
 
+def test_the_cart_s_limit_cycle_is_not_a_drift_but_a_trend_is() -> None:
+    """The held seesaw's cart swings in the friction limit cycle (±7 mm at 4.9 rad/s in a 20 s demo run with ideal
+    encoders): over the pendulum's 1 s window its last half-swing looks like a drift to the track end; the seesaw's
+    2 s window sees no trend. A cart that really creeps (2 cm/s) is still named."""
+    swing = np.where(TAPPED, 0.008 * np.sin(4.87 * (T - 1.0) + 1.83), 0.0)
+    level = np.where(TAPPED, np.radians(0.2) * np.sin(4.87 * (T - 1.0)), 0.0)
+    assert "drift" in [w.kind for w in judge({**_columns(level, T, swing), "alpha": level}, poke_start=1.0, limits=LIMITS).warnings]
+    assert judge(_columns(level, T, swing), poke_start=1.0, limits=LIMITS, plant="seesaw").clean
+    creep = swing + np.where(TAPPED, 0.02 * (T - 1.0), 0.0)
+    drift = [w for w in judge(_columns(level, T, creep), poke_start=1.0, limits=LIMITS, plant="seesaw").warnings if w.kind == "drift"]
+    assert drift and "weight x more" in drift[0].advice
+
+
 def test_cut_at_the_track_names_the_tilt_at_the_cut() -> None:
     x = np.where(TAPPED, 0.2 * (T - 1.0), 0.0)  # reaches 0.35 m at t = 2.75 s
     reason = np.where(T >= 2.75, float(TRIP_TRACK), 0.0)

@@ -76,7 +76,8 @@ largest excursion; the friction and quantization limit cycle is the SPEC's
 ``limit_cycle_amplitude_rad`` of the tilt (it appears once the tilt has converged: a 20 s run).
 The small-margin warning reads the tilt against :data:`TILT_MARGIN` (3/4) of its limit instead of half:
 Quanser's lab prescribes the tap (about 5°), so it varies less than a free poke of the pendulum, and
-a response beyond 3/4 of the limit is cut by a tap a third harder.
+a response beyond 3/4 of the limit is cut by a tap a third harder. The drift is the cart's trend over
+:data:`SEESAW_DRIFT_WINDOW` (2 s): the held seesaw's cart keeps swinging in the friction limit cycle.
 
 Examples
 --------
@@ -128,6 +129,11 @@ TILT_HOLD = 1.0
 TILT_MARGIN = 0.75
 #: Window at the end of a seesaw run over which the residual tilt is read (s).
 RESIDUAL_WINDOW = 1.0
+#: The seesaw's drift window (s): its state feedback holds the cart, which keeps swinging a few mm in the
+#: friction limit cycle (periods of 1.3 to 1.7 s in the demo with and without quantization); a trend
+#: fitted over 1 s reads a swing's half as a drift (a false "19 s to the track end" in a 20 s demo run
+#: with ideal encoders), over 2 s it does not (220 s).
+SEESAW_DRIFT_WINDOW = 2.0
 
 #: The warnings, worst first (the order of the first line and of the list under it).
 WARNING_ORDER = ("chattering", "saturation", "unsettled", "drift", "small margin")
@@ -415,7 +421,8 @@ def judge(
         if outcome in ("balanced", "not tested"):
             x = np.asarray(columns["x"], dtype=float)[window] if "x" in columns else None
             warnings += _cart_and_margin_warnings(tw, None if caught else alpha[window], x, limits, measures, recentre,
-                                                  angle_margin=TILT_MARGIN if seesaw else ANGLE_MARGIN)
+                                                  angle_margin=TILT_MARGIN if seesaw else ANGLE_MARGIN,
+                                                  drift_window=SEESAW_DRIFT_WINDOW if seesaw else DRIFT_WINDOW)
     if seesaw:
         x_all = np.asarray(columns["x"], dtype=float) if "x" in columns else None
         warnings = _seesaw_warnings(warnings, t, alpha, x_all, poke_start, cut_time, outcome, limits, measures)
@@ -559,7 +566,8 @@ def _voltage_warnings(t: np.ndarray, v: np.ndarray, span: float, limits: Limits,
 
 
 def _cart_and_margin_warnings(t: np.ndarray, alpha: np.ndarray | None, x: np.ndarray | None, limits: Limits, measures: dict[str, Any],
-                              recentre: bool = False, angle_margin: float = ANGLE_MARGIN) -> list[Warning]:
+                              recentre: bool = False, angle_margin: float = ANGLE_MARGIN,
+                              drift_window: float = DRIFT_WINDOW) -> list[Warning]:
     out: list[Warning] = []
     largest_alpha = float(np.max(np.abs(alpha))) if alpha is not None else 0.0
     if alpha is not None:
@@ -573,8 +581,8 @@ def _cart_and_margin_warnings(t: np.ndarray, alpha: np.ndarray | None, x: np.nda
         measures["largest_x_m"] = largest_x
         if largest_x > TRACK_MARGIN * limits.x_max:
             small.append(f"the cart reached {largest_x:.3f} m of the {limits.x_max:.2f} m track limit")
-        # The cart's trend: a straight line through the last DRIFT_WINDOW s.
-        tail = t >= t[-1] - DRIFT_WINDOW
+        # The cart's trend: a straight line through the last DRIFT_WINDOW s (the seesaw's: SEESAW_DRIFT_WINDOW).
+        tail = t >= t[-1] - drift_window
         if tail.sum() >= 3:
             speed, offset = np.polyfit(t[tail] - t[-1], x[tail], 1)
             speed, x_end = float(speed), float(offset)

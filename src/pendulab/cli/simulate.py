@@ -316,7 +316,8 @@ def _print_seesaw(result: Any) -> None:
         print(f"  last second         within {deg(m['residual_tilt_rad'])} of level")
     amplitude, frequency = m.get("limit_cycle_amplitude_rad"), m.get("limit_cycle_frequency_rad_s")
     if amplitude is not None and frequency is not None:
-        print(f"  limit cycle         ±{math.degrees(amplitude):.2f}° at {frequency:.3g} rad/s (sustained oscillation: friction and quantization)")
+        cause = "friction and quantization" if params.q_theta > 0 else "friction (the encoders are ideal in this run)"
+        print(f"  limit cycle         ±{math.degrees(amplitude):.2f}° at {frequency:.3g} rad/s (sustained oscillation: {cause})")
     elif "limit_cycle_amplitude_rad" in why:
         print(f"  limit cycle         n/a ({why['limit_cycle_amplitude_rad']})")
     print(_metric_line("natural frequency", m, "natural_frequency_rad_s", " rad/s"))
