@@ -127,6 +127,8 @@ def compare_case(before: Path, after: Path) -> list[str]:
             what = "variable"
         changed, added, removed = compare_keys(old, new)
         verdict = "every old " + what + " bit-identical" if not changed else f"CHANGED {what}s: {changed}"
+        if changed and name == "metrics.json":
+            verdict += " (" + ", ".join(f"{k} {old[k]!r} -> {new[k]!r}" for k in changed) + ")"
         lines.append(f"  {name:12s} differs ({len(a)} / {len(b)} bytes): {verdict}; added {added}; missing {removed}")
         if name == "run.mat":
             changed, added, removed = compare_keys(old_meta, new_meta)
