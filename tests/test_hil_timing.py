@@ -28,8 +28,10 @@ class SimulatedTime:
 
     def __init__(self) -> None:
         self.now = 1000.0
+        self.reads = 0
 
     def perf_counter(self) -> float:
+        self.reads += 1
         self.now += 20e-6  # (a spin loop that reads the clock makes progress)
         return self.now
 
@@ -40,8 +42,8 @@ class SimulatedTime:
 class Host:
     """Answers each SAMPLE 0.3 ms after the emulator sent it (a quick host), until ``answer_until`` samples."""
 
-    def __init__(self, clock: SimulatedTime, answer_until: int | None = None) -> None:
-        self.clock, self.answer_until = clock, answer_until
+    def __init__(self, clock: SimulatedTime, answer_until: int | None = None, answer_after: float = 3e-4) -> None:
+        self.clock, self.answer_until, self.answer_after = clock, answer_until, answer_after
         self.reader = P.FrameReader()
         self.pending: list[tuple[float, bytes]] = []
         self.samples: list[P.Sample] = []
@@ -52,7 +54,7 @@ class Host:
                 self.samples.append(frame)
                 if self.answer_until is None or len(self.samples) <= self.answer_until:
                     command = P.Command(len(self.samples) & 0xFFFF, answers=frame.seq, voltage_mv=1000, flags=P.ENABLE)
-                    self.pending.append((self.clock.now + 3e-4, P.encode(command)))
+                    self.pending.append((self.clock.now + self.answer_after, P.encode(command)))
 
     def read(self) -> bytes:  # what has reached the emulator by now
         due = [data for at, data in self.pending if at <= self.clock.now]
@@ -60,14 +62,15 @@ class Host:
         return b"".join(due)
 
 
-def _emulator_run(monkeypatch, *, stall_before_sample: int | None, answer_until: int | None, seconds: float = 0.4):
-    """A configured, streaming emulator (N = 4, watchdog 20 ms) on the simulated clock; the emulator itself is
-    held for 80 ms just before it sends sample ``stall_before_sample``."""
+def _emulator_run(monkeypatch, *, stall_before_sample: int | None, answer_until: int | None, seconds: float = 0.4,
+                  tick_cost: float = 0.0, answer_after: float = 3e-4, delay: int = 4):
+    """A configured, streaming emulator (N = ``delay``, watchdog 20 ms) on the simulated clock; the emulator itself is
+    held for 80 ms just before it sends sample ``stall_before_sample``, and for ``tick_cost`` s before every sample."""
     clock = SimulatedTime()
     monkeypatch.setattr(emulator_module, "time", clock)
     lines: list[str] = []
     emu = emulator_module.RigEmulator(emulator_module.EmulatorOptions(), announce=lines.append)
-    host = Host(clock, answer_until)
+    host = Host(clock, answer_until, answer_after)
     emu._read, emu._write = host.read, host.write
     sent = 0
     real_send = emu.send
@@ -76,13 +79,14 @@ def _emulator_run(monkeypatch, *, stall_before_sample: int | None, answer_until:
         nonlocal sent
         if isinstance(frame, P.Sample):
             sent += 1
+            clock.now += tick_cost
             if sent == stall_before_sample:
                 clock.now += 0.080  # the OS does not run the emulator for 80 ms
         real_send(frame)
 
     emu.send = send
     try:
-        emu._handle(P.Configure(0, period_us=1000, watchdog_ms=20, delay=4, x_min=-20000, x_max=20000, v_max_mv=10000), 0.0)
+        emu._handle(P.Configure(0, period_us=1000, watchdog_ms=20, delay=delay, x_min=-20000, x_max=20000, v_max_mv=10000), 0.0)
         emu._handle(P.Stream(1, on=1), 0.0)
         emu.run(seconds)
     finally:
@@ -109,6 +113,29 @@ def test_a_host_that_stops_answering_still_trips_the_watchdog_after_20_ms(monkey
     assert host.samples[first].voltage_mv == 0 and not host.samples[first].status & P.ST_ENABLED
 
 
+def test_an_emulator_that_stays_behind_its_schedule_still_trips_on_a_silent_host(monkeypatch):
+    """Each tick costs 1.05 periods (an overloaded emulator): its lateness grows by 50 us a tick, which is credited,
+    and the silent host is still given 20 ms of the rig's time only (crediting the whole lateness again at every
+    tick, as before, gave it forever: no trip in 0.4 s)."""
+    emu, host, lines = _emulator_run(monkeypatch, stall_before_sample=None, answer_until=250, tick_cost=1.05e-3)
+    first = next((k for k, s in enumerate(host.samples) if s.status & P.ST_WATCHDOG), None)
+    assert first is not None, "the watchdog never tripped"
+    assert 250 + 19 <= first <= 250 + 23, first
+
+
+def test_the_emulator_sleeps_while_it_waits_for_a_late_answer(monkeypatch):
+    """Answers come 1.5 periods after each sample at N = 1: every tick waits for its answer until the deadline.
+    It must sleep there (select/sleep), not spin on the clock: a spinning SCHED_FIFO emulator keeps a core from
+    the kernel worker that moves the pty's bytes, the very answer it waits for (traced: bench/rt_trace.py)."""
+    emu, host, lines = _emulator_run(monkeypatch, stall_before_sample=None, answer_until=None, answer_after=1.5e-3,
+                                     delay=1, seconds=0.2)
+    ticks = len(host.samples)
+    reads = emulator_module.time.reads  # (the simulated clock, counting)
+    assert ticks > 100
+    # A spin reads the clock every 20 us of waiting (some 50 reads per tick here); sleeping, a handful.
+    assert reads / ticks < 15, reads / ticks
+
+
 # ---------------------------------------------------------------- the host's writes and reads
 pty_only = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")
 
@@ -130,7 +157,13 @@ def test_a_full_pseudo_terminal_whose_peer_reads_again_is_not_a_lost_link():
             try:
                 filled += os.write(link.port.fileno(), b"\0" * 256)
             except BlockingIOError:
-                break
+                # (the kernel's worker may still move bytes into the peer's read buffer, making room: full
+                # only when a fill 50 ms later finds none)
+                time.sleep(0.05)
+                try:
+                    filled += os.write(link.port.fileno(), b"\0" * 256)
+                except BlockingIOError:
+                    break
         reader.start()
         started = time.perf_counter()
         link.command(7, 1.0, enable=True)  # pyserial's write_timeout of 0.5 s called this "link lost (Write timeout)"

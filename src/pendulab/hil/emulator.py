@@ -285,6 +285,24 @@ class RigEmulator:
             self._last_delivery = at
             self._incoming.append((at, self._corrupt(data)))
 
+    def _wait_for_bytes(self, until: float) -> bool:
+        """Sleep until the host's bytes come (or bytes already read cross the link's latency), at most to ``until``.
+
+        Blocking, not spinning: at a real-time priority a spinning emulator keeps a core from the kernel
+        workers that deliver the pty's bytes, the very bytes it waits for. False once ``until`` has passed.
+        """
+        assert self._clock is not None
+        left = until - self._clock()
+        if left <= 0:
+            return False
+        if self._incoming:  # bytes in flight on an emulated latency: wake when the next crosses
+            left = min(left, max(0.0, self._incoming[0][0] - self._clock()))
+        if self._fileno is None:
+            time.sleep(left)
+        else:
+            select.select([self._fileno], [], [], left)
+        return True
+
     def _receive(self, now: float) -> list[P.Frame]:
         """Frames whose bytes have crossed the link by ``now``."""
         self._pull(now)
@@ -381,6 +399,7 @@ class RigEmulator:
                     cmd = self.ring[want % RING]
                     if (cmd is not None and cmd.answers == want) or at >= deadline:
                         break
+                    self._wait_for_bytes(deadline)  # blocking: a spinning real-time process starves the pty's worker
             if cmd is not None and cmd.answers == want:
                 due = cmd
             else:
@@ -478,33 +497,40 @@ class RigEmulator:
         self._clock = lambda: time.perf_counter() - t0
         next_tick = t0
         k = 0
+        lag = 0.0
         while not self._stop:
             # Wait for the tick, reading the host's bytes as they come (so that the link's latency counts
-            # from when they were written); sleep to just before the tick, then spin: a sleep alone
-            # wakes 50-100 us late.
+            # from when they were written). Blocking to the tick, never spinning: the bytes this process
+            # waits for are delivered by kernel workers that a spinning real-time process keeps off its
+            # core (a sleep wakes some 50 us late, which the host never sees: its N periods count from
+            # when each sample really went out).
             while True:
                 now = time.perf_counter()
                 left = next_tick - now
                 if left <= 0:
                     break
-                if left > 3e-4 and self._fileno is not None and now - t0 >= stalled_until:
-                    if select.select([self._fileno], [], [], left - 3e-4)[0]:
+                if self._fileno is not None and now - t0 >= stalled_until:
+                    if select.select([self._fileno], [], [], left)[0]:
                         try:
                             self._pull(time.perf_counter() - t0)
                         except ConnectionError:
-                            pass  # seen again (and handled) at the tick
-                elif left > 3e-4:
-                    time.sleep(left - 3e-4)
+                            # Seen again (and handled) at the tick; a closed socket stays readable: no busy wait.
+                            time.sleep(max(0.0, next_tick - time.perf_counter()))
+                else:
+                    time.sleep(left)
             now = time.perf_counter() - t0
-            overslept = now - (next_tick - t0)
-            if overslept > 2 * period and self.last_command_time is not None:
-                # This process did not run (the OS gave the core to others): a rig's timer never stops,
-                # and the host had no sample to answer meanwhile, so that time does not count against
-                # the host in the watchdog (a 90 ms stall of this emulator on a loaded host tripped it).
-                # Every stall counts alike, wherever this process was held (sleeping here or in the tick).
-                self.last_command_time += overslept - period
-            if overslept > 0.05:  # suspended (debugger, overload): do not race to catch up
+            # How late this tick runs. A rig's timer never stops, but this process may not run (the OS gives
+            # the core to others, here or inside the last tick): when the lateness grows, the host had no sample
+            # to answer for that long, so the growth does not count against the host in the watchdog (a 90 ms
+            # stall of this emulator on a loaded host tripped it). Only the growth: a lateness that persists was
+            # credited once (crediting it at every tick kept a silent host from ever tripping the watchdog).
+            late_now = now - (next_tick - t0)
+            if late_now > lag and self.last_command_time is not None:
+                self.last_command_time += late_now - lag
+            lag = max(late_now, 0.0)
+            if late_now > 0.05:  # suspended (debugger, overload): do not race to catch up
                 next_tick = t0 + now
+                lag = 0.0
             if duration is not None and now >= duration:
                 return "duration"
             since = None if self.connected_at is None else now - self.connected_at
