@@ -122,9 +122,14 @@ def _trace_host(out: str) -> None:
 
 def _role(role: str, out: str, argv: list[str]) -> int:
     (_trace_emulator if role == "emulator" else _trace_host)(out)
-    from pendulab.cli.main import main
+    import runpy
 
-    return int(main(argv) or 0)
+    sys.argv = ["pendulab", *argv]  # 'python -m pendulab ...' in this (traced) process
+    try:
+        runpy.run_module("pendulab", run_name="__main__", alter_sys=True)
+    except SystemExit as exc:
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 1
+    return 0
 
 
 # ---------------------------------------------------------------- kernel scheduler trace (optional)
