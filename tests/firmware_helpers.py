@@ -22,13 +22,15 @@ class Twin(PortProcess):
 
     name = "twin"
 
-    def __init__(self, *args: str, trace: Path | None = None, profile: Path | None = None, params: dict | None = None) -> None:
+    def __init__(self, *args: str, trace: Path | None = None, profile: Path | None = None, params: dict | None = None,
+                 plant: str = "pendulum") -> None:
         from pendulab.hil.firmware import build_firmware, build_twin
         from pendulab.model.parameters import PlantParameters
+        from pendulab.model.seesaw import SeesawParameters
 
         hex_path, twin = build_firmware(), build_twin()
-        p = PlantParameters.preset().with_values(**(params or {}))
-        command = [str(twin), str(hex_path), "--params", ",".join(repr(v) for v in p.as_vector()), *args]
+        p = (SeesawParameters() if plant == "seesaw" else PlantParameters.preset()).with_values(**(params or {}))
+        command = [str(twin), str(hex_path), "--plant", plant, "--params", ",".join(repr(v) for v in p.as_vector()), *args]
         if trace is not None:
             command += ["--trace", str(trace)]
         if profile is not None:

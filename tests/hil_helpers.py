@@ -94,14 +94,51 @@ def read_log(path: Path):
     return np.genfromtxt(path, delimiter=",", names=True)
 
 
-def angle_error_against_simulate(run: Path, poke: str, out: Path) -> tuple[int, float]:
-    """``pendulab simulate --demo`` at the rig run's measured delay N and poke, 4 s, into ``out``; the
-    angle's NRMSE between the two over 1 s after the poke. Returns ``(N, nrmse)``."""
+def angle_error_against_simulate(run: Path, poke: str, out: Path, *, plant: str = "pendulum", window: float = 1.0) -> tuple[int, float]:
+    """``pendulab simulate [--plant seesaw] --demo`` at the rig run's measured delay N and poke (the seesaw's tap), 4 s,
+    into ``out``; the angle's (the seesaw's tilt's) NRMSE between the two over ``window`` s after the poke, both aligned
+    at their poke as ``pendulab compare`` aligns them. Returns ``(N, nrmse)``."""
     import json
 
     from pendulab.analysis.compare import load_compared, nrmse
     from pendulab.cli.main import main
 
     n = json.loads((run / "timing.json").read_text())["delay_periods"]
-    assert main(["simulate", "--demo", "--delay", str(n), "--poke", poke, "--stop-time", "4", "--out", str(out)]) == 0
-    return n, nrmse(load_compared(run), load_compared(out), "alpha", window=1.0)
+    assert main(["simulate", "--plant", plant, "--demo", "--delay", str(n), "--poke", poke, "--stop-time", "4", "--out", str(out)]) == 0
+    return n, nrmse(load_compared(run), load_compared(out), window=window)
+
+
+#: The seesaw's tap in the rig tests (rad/s^2, s, s after the hand lets go): about 5 degrees of tilt under Quanser's LQR.
+SEESAW_TAP = "3.3,0.1,1"
+#: The seesaw's tilt encoder step: 4096 counts per turn behind the 3:1 gear.
+SEESAW_COUNT = 2 * 3.141592653589793 / 4096 / 3
+
+
+def check_seesaw_held(out: Path, stop: float) -> dict:
+    """The checks of a ``lab --plant seesaw --demo`` session of ``stop`` s with the tap: held level with no trip for
+    10 s, the tap's peak and the return near level, the cart inside the supervisor's limit, every sample in the log,
+    the tilt in steps of the geared encoder. Returns the figures (printed by the caller)."""
+    import json
+
+    import numpy as np
+
+    log = read_log(out / "rig_log.csv")
+    running = log["supervisor_state"] == 2
+    assert not (log["supervisor_state"] == 4).any(), "the supervisor tripped"
+    assert log["t"][running][-1] - log["t"][running][0] >= 10.0
+    assert np.all(np.diff(log["tick"]) == 1)
+    # The tilt: the tap's peak (5.1 deg simulated), then back near level; the cart within the supervisor's 0.35 m.
+    tilt = np.degrees(np.abs(log["theta"]))
+    assert 2.5 < tilt.max() < 8.0
+    metrics = json.loads((out / "metrics.json").read_text())
+    tap = metrics["poke_start_detected_s"]
+    assert tap is not None and 0.95 < tap - metrics["hand_release_s"] < 1.2
+    # The lab judges the session as a seesaw (the verdict's words and numbers, as simulate's).
+    assert metrics["verdict"]["plant"] == "seesaw" and metrics["verdict"]["headline"].startswith("HELD LEVEL for ")
+    assert metrics["tilt_settling_time_s"] is not None and metrics["tilt_settling_time_s"] < 3.0
+    after = float(tilt[log["t"] > tap + 3.0].max())
+    assert after < 1.0
+    assert np.abs(log["x"]).max() < 0.3
+    steps = np.unique(np.round(np.abs(np.diff(log["theta"])) / SEESAW_COUNT, 6))
+    assert set(steps) <= {0.0, 1.0, 2.0, 3.0}, steps
+    return {"peak_deg": float(tilt.max()), "after_3s_deg": after, "max_abs_x_m": float(np.abs(log["x"]).max())}

@@ -61,6 +61,18 @@ def test_identify_answers_with_the_documented_fields():
     assert ids[0] != ids[1]  # the power-up SRAM differs, so does the boot id
 
 
+def test_the_seesaw_jumper_puts_the_3_to_1_gear_in_the_identity():
+    """Issue 20: on the seesaw (jumper PA6 to GND, which the twin's --plant seesaw wires) the pivot encoder on the
+    pendulum's channel turns 3 times per turn of the seesaw: 3 x 4096 counts per turn in the IDENTITY."""
+    from pendulab.hil.link import RigLink
+
+    with twin(plant="seesaw") as t, RigLink.open(t.port) as link:
+        identity = link.identify()
+    assert identity.pend_counts_per_rad == pytest.approx(3 * 4096 / (2 * np.pi), rel=1e-6)
+    assert identity.cart_counts_per_m == pytest.approx(1 / 22.75e-6, rel=1e-6)
+    assert "seesaw on its tilt stop" in t.text
+
+
 def test_configure_rejects_out_of_range_values():
     from pendulab.hil import protocol as P
     from pendulab.hil.link import RigLink

@@ -147,3 +147,34 @@ def test_animate_and_ssp_for_the_seesaw(tmp_path: Path, capsys) -> None:
     peak = np.max(np.abs(ours))
     assert np.max(np.abs(theta)) == pytest.approx(peak, rel=0.05)
     assert np.max(np.abs(theta - ours)) < 0.1 * peak
+
+
+def test_compare_aligns_seesaw_runs_at_their_tap_and_refuses_mixing_plants(demo, tmp_path: Path, capsys) -> None:
+    """``pendulab compare`` reads seesaw runs (their tilt, aligned at the tap): its NRMSE is the tilt's, computed here
+    again from the two run.mat files; a seesaw run and a pendulum run are refused (one line, exit 2)."""
+    from pendulab.analysis.compare import load_compared
+
+    _, _, out = demo
+    delayed = tmp_path / "delay3"
+    assert main(["simulate", "--plant", "seesaw", "--demo", "--delay", "3", "--stop-time", "3", "--out", str(delayed)]) == 0
+    assert main(["compare", str(out), str(delayed), "--out", str(tmp_path / "cmp")]) == 0
+    runs = [load_compared(path) for path in (out, delayed)]
+    assert [(run.angle, run.poke_start) for run in runs] == [("theta", 1.0), ("theta", 1.0)]
+    table = (tmp_path / "cmp" / "comparison.txt").read_text()
+    reported = float(next(line for line in table.splitlines() if line.startswith("angle NRMSE vs first")).split()[-2])
+    # The same figure from the files: the delayed tilt against the first over 1 s after the tap, by the first's range.
+    a, b = (scipy.io.loadmat(path / "run.mat") for path in (out, delayed))
+    t = a["t"].ravel()
+    window = (t >= 1.0) & (t <= 2.0)
+    first = a["theta"].ravel()[window]
+    second = np.interp(t[window], b["t"].ravel(), b["theta"].ravel())
+    expected = 100 * np.sqrt(np.mean((second - first) ** 2)) / np.ptp(first)
+    assert 0.1 < expected and reported == pytest.approx(expected, abs=0.05)  # 3 periods of delay change the response (0.4 %)
+    assert (tmp_path / "cmp" / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    pendulum = tmp_path / "pendulum"
+    assert main(["simulate", "--demo", "--stop-time", "2", "--out", str(pendulum)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(out), str(pendulum), "--out", str(tmp_path / "mixed")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "different plants" in err[0], err
+    assert not (tmp_path / "mixed").exists()

@@ -427,6 +427,31 @@ def test_calibration_start_needs_the_cart_centred(make):
     assert s.tick("start", x_measured=0.0)["state"] == RUNNING
 
 
+def test_the_seesaw_starts_only_held_level(make):
+    """Issue 20, the seesaw's start rule (level_start): hold it level, then start. Tilted (resting on its stop, or
+    beyond the capture window), a start is refused with the reason; level, it starts; after a trip the same."""
+    s = make(level_start=True, auto_start=False, alpha_max=10 * DEG)
+    row = s.tick("start", alpha_measured=-11.5 * DEG, V_command=1.0)
+    assert (row["state"], row["V"]) == (IDLE, 0.0)
+    refused = [m for m in s.log if "start refused" in m]
+    assert len(refused) == 1 and "not level" in refused[0] and "11.5 deg" in refused[0], refused
+    s.tick(alpha_measured=1.2 * CAPTURE_WINDOW_DEFAULT)
+    assert s.tick("start", alpha_measured=1.2 * CAPTURE_WINDOW_DEFAULT)["state"] == IDLE
+    s.tick(alpha_measured=0.5 * CAPTURE_WINDOW_DEFAULT)
+    row = s.tick("start", alpha_measured=-0.5 * CAPTURE_WINDOW_DEFAULT, V_command=1.0)
+    assert (row["state"], row["V"]) == (RUNNING, 1.0)
+    # Running, the tilt may go anywhere within the angle limit (a 5-degree tap); beyond it, the trip.
+    assert s.tick(alpha_measured=5 * DEG, V_command=1.0)["state"] == RUNNING
+    assert s.tick(alpha_measured=10.5 * DEG)["state"] == TRIPPED
+    s.tick(alpha_measured=-11.5 * DEG)
+    assert s.tick("start", alpha_measured=-11.5 * DEG)["state"] == TRIPPED  # not level: still tripped
+    s.tick(alpha_measured=0.0)
+    assert s.tick("start", alpha_measured=0.0)["state"] == RUNNING
+    # Without the rule (the pendulum in simulation), a start is a start.
+    plain = make(auto_start=False, alpha_max=10 * DEG)
+    assert plain.tick("start", alpha_measured=5 * DEG)["state"] == RUNNING
+
+
 def test_calibration_auto_start_refused_off_centre(make):
     s = make(calibration_mode=True, x_measured=0.05)
     assert s.tick(x_measured=0.05)["state"] == IDLE

@@ -27,9 +27,12 @@
 #define LIMIT_RIGHT  PA3 /* [25] in, high = open = hit */
 #define LIMIT_FITTED PA4 /* [26] in, jumper to GND when the switches are fitted */
 #define AMP_FAULT    PA5 /* [27] in, low = amplifier fault */
+#define SEESAW       PA6 /* [28] in, jumper to GND on the seesaw (SEESAW-E): its pivot encoder is on the pendulum's
+                          * channel behind a 3:1 gear, 3 x 4096 counts per turn of the seesaw */
 
 #define DAC_FULL_SCALE_MV 10000
 #define CART_COUNTS_PER_M 43956.04f   /* IP02: 1 count = 22.75 um */
 #define PEND_COUNTS_PER_RAD 651.8986f /* 4096 counts per turn */
+#define SEESAW_GEAR 3.0f              /* SEESAW-E: the pivot encoder turns 3 times per turn of the seesaw */
 
 #endif

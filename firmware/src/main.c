@@ -308,6 +308,9 @@ static void ack(uint8_t type, uint8_t result) {
 static void send_identity(void) {
     uint8_t p[34];
     float cpm = CART_COUNTS_PER_M, cpr = PEND_COUNTS_PER_RAD;
+    /* The seesaw's jumper: its pivot encoder, behind the 3:1 gear, is on the pendulum's channel. Read at
+     * every IDENTIFY (the pull-up has long settled), so the host always learns what is wired now. */
+    if (!(PINA & _BV(SEESAW))) cpr *= SEESAW_GEAR;
     p[0] = PROTOCOL;
     p[1] = FW_MAJOR;
     p[2] = FW_MINOR;
@@ -504,7 +507,7 @@ static void make_boot_id(void) {
 int main(void) {
     /* Motor off before anything else. */
     DDRA = _BV(AMP_ENABLE) | _BV(TICK_OUT);
-    PORTA = _BV(LIMIT_LEFT) | _BV(LIMIT_RIGHT) | _BV(LIMIT_FITTED) | _BV(AMP_FAULT); /* pull-ups */
+    PORTA = _BV(LIMIT_LEFT) | _BV(LIMIT_RIGHT) | _BV(LIMIT_FITTED) | _BV(AMP_FAULT) | _BV(SEESAW); /* pull-ups */
     DDRB = _BV(DAC_CS) | _BV(DAC_SCK) | _BV(DAC_SDI);
     PORTB = _BV(DAC_CS);
     SPCR = _BV(SPE) | _BV(MSTR);

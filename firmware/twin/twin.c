@@ -1,12 +1,14 @@
 /* The rig's digital twin: the real firmware (.hex/.elf) in simavr, its pins wired to the plant.
  *
- * The plant is Plant.fmu's own CasADi-generated code (plant_rk4), integrated in the AVR's time in RK4
+ * The plant is Plant.fmu's own CasADi-generated code (plant_rk4), or with --plant seesaw Seesaw.fmu's
+ * (seesaw_rk4: its tilt on the pendulum encoder's channel behind the 3:1 gear, the firmware's seesaw jumper
+ * PA6 grounded), integrated in the AVR's time in RK4
  * steps of at most 100 us; a voltage change (DAC write or enable pin) splits a step at its cycle. The
  * encoders are driven as real quadrature edges on PD0..PD3 at the cycles where the (linearly
  * interpolated) positions cross a count boundary. The DAC (MCP4921 on the SPI) and the amplifier
  * enable pin give the voltage; UART0 is a pseudo-terminal whose path is the first line on stdout.
  *
- * twin FIRMWARE --params P1,...,Pn [--raise-after S] [--poke MAG,DUR,START] [--seed N]
+ * twin FIRMWARE [--plant pendulum|seesaw] --params P1,...,Pn [--raise-after S] [--poke MAG,DUR,START] [--seed N]
  *      [--restart-after S] [--fault-after S] [--close-after S] [--byte-error-rate P]
  *   test and measurement options: [--duration S] [--no-pace] [--trace FILE] [--profile FILE]
  *      [--kinematic V,W,T] [--hang-after S] [--idle BEGIN,END]
@@ -37,17 +39,25 @@
 
 #include "plant_casadi.h"
 #include "plant_sizes.h"
+#include "seesaw_casadi.h"
 
 #define F_CPU 16000000.0
 #define SUB_CYCLES 1600 /* 100 us: Plant.fmu's largest RK4 sub-step */
 #define CART_CPM 43956.04  /* counts per metre (IP02) */
 #define PEND_CPR 651.8986  /* counts per radian (4096 per turn) */
+#define SEESAW_GEAR 3.0   /* SEESAW-E: the pivot encoder turns 3 times per turn of the seesaw */
 #define HOLD_ANGLE (0.5 * M_PI / 180.0)
 #define RAISE_TIME 1.0     /* s a person takes to raise the pendulum */
+#define LIFT_TIME 0.6      /* s a person takes to lift the seesaw level (and centre the cart on it) */
+#define NP_MAX (PLANT_NP > SEESAW_NP ? PLANT_NP : SEESAW_NP)
 #define SPDR_ADDR 0x4E
 
 static avr_t *avr;
-static double params[PLANT_NP];
+static double params[NP_MAX];
+/* The plant: the pendulum (state x, xdot, alpha, alphadot; its encoder reads 0 hanging) or the seesaw (x, xdot,
+ * theta, thetadot; its encoder reads 0 level, 3 x 4096 counts per turn). */
+static int seesaw;
+static double angle_zero = M_PI, angle_cpr = PEND_CPR;
 static double state[4] = {0, 0, M_PI, 0}; /* at cycle seg_start */
 static double next_state[4];              /* predicted at cycle seg_end */
 static avr_cycle_count_t seg_start, seg_end;
@@ -64,6 +74,7 @@ static int seed_given = 0;
 
 /* the person */
 static double connected_at = -1, zeroed_at = -1, raise_at = -1, released_at = -1;
+static double lift_from[2];              /* the seesaw's x and tilt when the hand takes it */
 static int raising = 0, held = 0, raised_done = 0, hung = 0, faulted = 0;
 
 static double wall(void);
@@ -95,7 +106,8 @@ static void rk4(double *s, double V, double t, double h) {
     double out[4];
     const double *arg[5] = {s, &V, params, &t, &h};
     double *res[1] = {out};
-    plant_rk4(arg, res, iw, w, 0);
+    if (seesaw) seesaw_rk4(arg, res, iw, w, 0);
+    else plant_rk4(arg, res, iw, w, 0);
     memcpy(s, out, sizeof out);
 }
 
@@ -114,8 +126,28 @@ static void kinematic_state(double t, double *s) {
 
 static double x_hold;
 static int amp_enabled;
+static void seesaw_hand(double t, double *s) {
+    /* The person lifts the seesaw off its tilt stop to level along a smooth path, bringing the cart (which slid
+     * down the tilted track) back to the centre meanwhile, then holds both there until the controller has it. */
+    if (raising) {
+        double u = (t - raise_at) / LIFT_TIME;
+        if (u > 1) u = 1;
+        double g = 0.5 + 0.5 * cos(M_PI * u), dg = u < 1 ? -0.5 * M_PI * sin(M_PI * u) / LIFT_TIME : 0; /* 1 -> 0 */
+        s[0] = lift_from[0] * g;
+        s[1] = lift_from[0] * dg;
+        s[2] = lift_from[1] * g;
+        s[3] = lift_from[1] * dg;
+    } else if (held) {
+        s[0] = s[1] = s[2] = s[3] = 0;
+    }
+}
+
 static void hand(double t, double *s) {
     /* The person's hands override the pendulum while raising or holding it, and keep the cart still. */
+    if (seesaw) {
+        seesaw_hand(t, s);
+        return;
+    }
     if (raising || held) { /* until the raise is done, whatever the motor does */
         s[0] = x_hold;
         s[1] = 0;
@@ -195,7 +227,7 @@ static avr_cycle_count_t edge_timer(avr_t *a, avr_cycle_count_t when, void *para
 
 static void plan_encoders(void) {
     double u[2][2] = {{state[0] * CART_CPM, next_state[0] * CART_CPM},
-                      {(state[2] - M_PI) * PEND_CPR, (next_state[2] - M_PI) * PEND_CPR}};
+                      {(state[2] - angle_zero) * angle_cpr, (next_state[2] - angle_zero) * angle_cpr}};
     for (int i = 0; i < 2; i++) {
         enc[i].u0 = u[i][0];
         enc[i].u1 = u[i][1];
@@ -262,17 +294,18 @@ static void restart_steps(void) {
 }
 
 static void release(void) {
-    /* The controller has the pendulum: the hand lets go (and the poke is scheduled from now). */
+    /* The controller has the pendulum (seesaw): the hand lets go (and the poke, the seesaw's tap, is scheduled from now). */
+    const char *what = seesaw ? "seesaw" : "pendulum";
     held = 0;
     released_at = now_s();
     if (poke_start >= 0) {
-        params[P_poke_magnitude] = poke_mag;
-        params[P_poke_duration] = poke_dur;
-        params[P_poke_start] = released_at + poke_start;
-        say("hand released, the controller has the pendulum; poke %g rad/s^2 for %g s at t = %.3f s", poke_mag, poke_dur,
-            released_at + poke_start);
+        params[seesaw ? S_tap_magnitude : P_poke_magnitude] = poke_mag;
+        params[seesaw ? S_tap_duration : P_poke_duration] = poke_dur;
+        params[seesaw ? S_tap_start : P_poke_start] = released_at + poke_start;
+        say("hand released, the controller has the %s; %s %g rad/s^2 for %g s at t = %.3f s", what, seesaw ? "tap" : "poke",
+            poke_mag, poke_dur, released_at + poke_start);
     } else {
-        say("hand released, the controller has the pendulum");
+        say("hand released, the controller has the %s", what);
     }
 }
 
@@ -328,6 +361,13 @@ static void amp_enable(avr_irq_t *irq, uint32_t value, void *param) {
         amp_enabled = on;
         say(on ? "motor enabled" : "motor off (amplifier disabled)");
         set_voltage();
+        /* The pendulum's hand lets go when the motor pushes; the seesaw's when the motor is enabled (level,
+         * with the cart centred, the controller may well command 0 V). */
+        if (seesaw && held && on) {
+            advance_to(avr->cycle);
+            release();
+            restart_steps();
+        }
     }
 }
 
@@ -462,12 +502,45 @@ static void pacing(void) {
 }
 
 /* ------------------------------------------------------------------ the person and the faults */
-static avr_irq_t *fault_pin;
+static avr_irq_t *fault_pin, *seesaw_pin;
 static avr_flashaddr_t dead_loop;
+
+static void porta_external(void) {
+    /* Port A's pins driven from outside: the seesaw's jumper to GND (PA6), the amplifier's fault (PA5). In
+     * simavr 1.6 an internal pull-up re-raises a plain input pin at every write to its port; an 'external'
+     * value wins over it (one setting per port: both pins in it). */
+    avr_ioport_external_t e = {.name = 'A', .mask = (uint8_t)((seesaw ? 1 << 6 : 0) | (faulted ? 1 << 5 : 0)), .value = 0};
+    avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('A'), &e);
+    if (seesaw) avr_raise_irq(seesaw_pin, 0);
+}
+
+static void seesaw_person(double t, double since) {
+    /* The seesaw's operator lifts it level (raise_after s after the host connects, whether or not the host has
+     * zeroed: the tilt encoder must be zeroed level, "hold it level, then start"), holds it, lets go when the
+     * motor is enabled. */
+    if (raise_after >= 0 && !raised_done && !raising && since >= raise_after) {
+        raising = 1;
+        raise_at = t;
+        lift_from[0] = state[0];
+        lift_from[1] = state[2];
+        say("a person lifts the seesaw level off its tilt stop (%.1f s) and centres the cart (from x = %+.3f m); held until the motor "
+            "is enabled", LIFT_TIME, state[0]);
+    }
+    if (raising && t >= raise_at + LIFT_TIME) {
+        raising = 0;
+        raised_done = 1;
+        held = 1;
+        say("seesaw lifted level off its tilt stop by hand, cart centred; held until the motor is enabled");
+        if (zeroed_at >= 0) say("the host zeroed the encoders before the seesaw was level: its tilt reads off by the difference");
+        if (amp_enabled) release(); /* the controller engaged during the lift (the step after this predicts from here) */
+    }
+}
 
 static void person(double t) {
     double since = connected_at < 0 ? -1 : t - connected_at;
-    if (raise_after >= 0 && !raised_done && !raising && since >= raise_after && zeroed_at >= 0 && t >= zeroed_at + 0.1) {
+    if (seesaw) {
+        seesaw_person(t, since);
+    } else if (raise_after >= 0 && !raised_done && !raising && since >= raise_after && zeroed_at >= 0 && t >= zeroed_at + 0.1) {
         raising = 1;
         raise_at = t;
         x_hold = state[0];
@@ -488,10 +561,7 @@ static void person(double t) {
     }
     if (since >= 0 && fault_after >= 0 && since >= fault_after && !faulted) {
         faulted = 1;
-        /* Driven low from outside: in simavr 1.6 an internal pull-up re-raises a plain input pin at every
-         * write to its port, an 'external' value wins over it. */
-        avr_ioport_external_t e = {.name = 'A', .mask = 1 << 5, .value = 0};
-        avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('A'), &e);
+        porta_external(); /* driven low from outside */
         avr_raise_irq(fault_pin, 0);
         say("amplifier fault input active");
     }
@@ -644,10 +714,16 @@ static int parse_list(const char *s, double *out, int n) {
 int main(int argc, char **argv) {
     const char *firmware = NULL;
     int have_params = 0;
+    double given[NP_MAX + 1];
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
 #define NEEDV() do { if (!v) usage("missing value"); i++; } while (0)
-        if (!strcmp(a, "--params")) { NEEDV(); if (parse_list(v, params, PLANT_NP) != PLANT_NP) usage("--params needs the plant's parameter vector"); have_params = 1; }
+        if (!strcmp(a, "--params")) { NEEDV(); have_params = parse_list(v, given, NP_MAX + 1); if (have_params < 0) usage("--params needs the plant's parameter vector"); }
+        else if (!strcmp(a, "--plant")) {
+            NEEDV();
+            if (strcmp(v, "pendulum") && strcmp(v, "seesaw")) usage("--plant pendulum or --plant seesaw");
+            seesaw = !strcmp(v, "seesaw");
+        }
         else if (!strcmp(a, "--raise-after")) { NEEDV(); raise_after = atof(v); }
         else if (!strcmp(a, "--poke")) { NEEDV(); double p[3]; if (parse_list(v, p, 3) != 3) usage("--poke MAG,DUR,START"); poke_mag = p[0]; poke_dur = p[1]; poke_start = p[2]; }
         else if (!strcmp(a, "--seed")) { NEEDV(); seed = (unsigned)strtoul(v, NULL, 10) * 2654435761u + 1; seed_given = 1; }
@@ -674,15 +750,28 @@ int main(int argc, char **argv) {
     }
     if (!firmware) usage("give the firmware (.hex or .elf)");
     if (!have_params) usage("--params is required");
+    if (have_params != (seesaw ? SEESAW_NP : PLANT_NP))
+        usage(seesaw ? "--params needs the seesaw's parameter vector (SeesawParameters.as_vector())"
+                     : "--params needs the plant's parameter vector (PlantParameters.as_vector())");
+    memcpy(params, given, sizeof(double) * have_params);
     if (!seed_given) {
         struct timespec ts;
         clock_gettime(CLOCK_REALTIME, &ts);
         seed = (unsigned)(ts.tv_nsec ^ (ts.tv_sec << 10) ^ ((unsigned)getpid() << 16));
     }
     if (!seed) seed = 1;
-    params[P_poke_magnitude] = 0.0; /* the person pokes, not the model's default poke */
-    params[P_q_alpha] = 0.0;        /* quantization happens in the encoders */
-    params[P_q_x] = 0.0;
+    if (seesaw) {
+        params[S_tap_magnitude] = 0.0; /* the person taps, not the model's default tap */
+        params[S_q_theta] = 0.0;       /* quantization happens in the encoders */
+        params[S_q_x] = 0.0;
+        angle_zero = 0.0;              /* the tilt encoder reads 0 level ... */
+        angle_cpr = PEND_CPR * SEESAW_GEAR;
+        state[2] = -params[S_theta_stop]; /* ... and the seesaw rests on a tilt stop, as the rig emulator's */
+    } else {
+        params[P_poke_magnitude] = 0.0; /* the person pokes, not the model's default poke */
+        params[P_q_alpha] = 0.0;        /* quantization happens in the encoders */
+        params[P_q_x] = 0.0;
+    }
 
     avr_global_logger_set(simavr_log);
     avr = avr_make_mcu_by_name("atmega2560");
@@ -728,6 +817,8 @@ int main(int argc, char **argv) {
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('A'), 1), tick_pin, NULL);
     fault_pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('A'), 5);
     avr_raise_irq(fault_pin, 1);
+    seesaw_pin = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('A'), 6);
+    porta_external();
     for (int i = 0; i < 2; i++) {
         enc[i].a = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), enc[i].pin_a);
         enc[i].b = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), enc[i].pin_a + 1);
@@ -760,13 +851,14 @@ int main(int argc, char **argv) {
     atexit(at_exit);
     if (kinematic) kinematic_state(0, state);
     for (int i = 0; i < 2; i++) {
-        double u = i == 0 ? state[0] * CART_CPM : (state[2] - M_PI) * PEND_CPR;
+        double u = i == 0 ? state[0] * CART_CPM : (state[2] - angle_zero) * angle_cpr;
         enc[i].count = lround(floor(u + 0.5));
         drive_pins(&enc[i]);
     }
     seg_start = avr->cycle;
     restart_steps();
-    say("twin ready: firmware %s in simavr (ATmega2560, 16 MHz), pendulum hanging, cart centred, motor off", firmware);
+    say("twin ready: firmware %s in simavr (ATmega2560, 16 MHz), %s, cart centred, motor off", firmware,
+        seesaw ? "seesaw on its tilt stop (seesaw jumper PA6 to GND)" : "pendulum hanging");
     wall_start = wall0 = wall();
 
     for (;;) {
@@ -801,6 +893,7 @@ int main(int argc, char **argv) {
             xoff = 1;
             for (int i = 0; i < 2; i++) drive_pins(&enc[i]);
             avr_raise_irq(fault_pin, faulted ? 0 : 1);
+            porta_external();
             set_voltage();
             restart_steps();
             continue;

@@ -1,5 +1,8 @@
 """Runs side by side (rig against simulation): aligned at the poke, the old lab's table, an overlay plot.
 
+A seesaw run (its tilt ``theta`` where the pendulum's runs have ``alpha``) is compared by its tilt, aligned at
+its tap; runs of the two plants are not compared with each other.
+
 The poke's onset in a measured angle (:func:`detect_poke`) is found here too: the lab's results and
 the comparison of runs that do not say when their poke came both use it.
 
@@ -33,6 +36,8 @@ TABLE = (
     ("cart_speed_change_m_s", "cart speed change", "m/s", 1.0),
 )
 PANELS = (("alpha", "angle (rad)"), ("tip", "tip (m)"), ("x", "cart (m)"), ("voltage", "voltage (V)"))
+#: The seesaw's panels: its tilt, the cart, the voltage (no tip).
+SEESAW_PANELS = (("theta", "tilt (rad)"), ("x", "cart (m)"), ("voltage", "voltage (V)"))
 
 
 @dataclass
@@ -119,7 +124,7 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
     if poke is None and metrics.get("poke_start_detected_s") is not None:
         poke = float(metrics["poke_start_detected_s"])
     if poke is None:
-        poke = detect_poke(columns["t"], columns[angle], q_alpha=q_alpha)
+        poke = detect_poke(columns["t"], columns[angle], q_alpha=q_alpha, long_pulse=angle == "theta")
     if poke is None:
         what = "tap in the tilt" if angle == "theta" else "poke in the angle"
         raise UserError(f"no {what} of {path}; a comparison aligns runs at their {what.split()[0]}")
@@ -134,8 +139,10 @@ def load_compared(path: str | Path, *, Lp: float | None = None, q_alpha: float =
     return ComparedRun(label, columns, poke, metrics, source, angle)
 
 
-def nrmse(run: ComparedRun, reference: ComparedRun, name: str = "alpha", *, window: float = 1.0) -> float:
-    """RMS difference of ``name`` over ``window`` s after the poke, divided by the reference's range there."""
+def nrmse(run: ComparedRun, reference: ComparedRun, name: str | None = None, *, window: float = 1.0) -> float:
+    """RMS difference of ``name`` (default the reference's angle: ``alpha``, the seesaw's ``theta``) over ``window`` s
+    after the poke, divided by the reference's range there."""
+    name = name or reference.angle
     t_ref, y_ref = reference.aligned(name)
     t_run, y_run = run.aligned(name)
     keep = (t_ref >= 0) & (t_ref <= window) & (t_ref <= t_run[-1])
@@ -153,7 +160,7 @@ POKE_STEPS = 3
 
 
 def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: float | None = None,
-                before: float | None = None) -> float | None:
+                before: float | None = None, long_pulse: bool = False) -> float | None:
     """Onset of the poke in a measured angle: where the angular velocity jumps.
 
     A poke is a short pulse of angular acceleration, so the angle's speed (a central difference over
@@ -161,6 +168,11 @@ def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: floa
     of the run before any cut. The onset is the first sample where the speed reaches half that value
     (at most a few ms after the true start for a pulse of 5 ms). None when nothing moves by more than
     :data:`POKE_STEPS` encoder steps per difference window.
+
+    ``long_pulse``: the seesaw's tap lasts 0.1 s, along which the speed rises: half its peak comes some 60 ms
+    after the onset. The onset is then where the angle leaves its rest as a constant acceleration does,
+    ``(theta - rest) = a (t - onset)^2 / 2``: the square root of the departure is a straight line in time,
+    fitted over the early rise and extrapolated to zero (:func:`pulse_onset`).
     """
     t = np.asarray(t, dtype=float)
     alpha = np.asarray(alpha, dtype=float)
@@ -181,7 +193,43 @@ def detect_poke(t: np.ndarray, alpha: np.ndarray, *, q_alpha: float, after: floa
     if speed.size == 0 or speed.max() < POKE_STEPS * max(q_alpha, 1e-9) / (2 * w * h):
         return None
     first = int(np.argmax(speed >= 0.5 * speed.max()))
-    return float(ts[first + w])
+    half = float(ts[first + w])
+    if long_pulse:
+        onset = pulse_onset(ts, seg, half, q_alpha=q_alpha)
+        return half if onset is None else onset
+    return half
+
+
+def pulse_onset(t: np.ndarray, angle: np.ndarray, half: float, *, q_alpha: float, span: float = 0.15) -> float | None:
+    """Onset of a pulse of angular acceleration whose speed reaches half its peak at ``half`` (s).
+
+    The rest is the angle's median over 0.2 s ending ``span`` before ``half``; the departure from it grows as
+    ``a (t - onset)^2 / 2`` while the pulse acts, so ``sqrt(departure)`` is fitted by a straight line over the samples
+    in the ``span`` before ``half`` that have left the rest by 4 encoder steps and not yet by a quarter of the
+    response's peak, and extrapolated to zero. None when that leaves fewer than 5 samples or no onset within ``span``.
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 2.0, 0.001)
+    >>> theta = np.where(t > 1.0, 0.5 * 3.3 * (t - 1.0) ** 2, 0.0)      # 3.3 rad/s^2 from t = 1 s
+    >>> round(pulse_onset(t, theta, 1.05, q_alpha=5e-4), 3)
+    1.0
+    """
+    rest_window = (t > half - span - 0.2) & (t <= half - span)
+    if not rest_window.any():
+        return None
+    departure = np.abs(angle - np.median(angle[rest_window]))
+    after = (t > half) & (t < half + 0.4)
+    if not after.any():
+        return None
+    use = (t > half - span) & (t <= half) & (departure >= 4 * q_alpha) & (departure <= 0.25 * departure[after].max())
+    if use.sum() < 5:
+        return None
+    slope, intercept = np.polyfit(t[use], np.sqrt(departure[use]), 1)
+    if slope <= 0:
+        return None
+    onset = float(-intercept / slope)
+    return onset if half - span <= onset <= half else None
 
 
 def _fmt(value: Any, unit: str) -> str:
@@ -222,9 +270,11 @@ def plot_comparison(runs: list[ComparedRun], path: Path, *, window: tuple[float,
 
     from pendulab.analysis.results import atomic_write
 
+    panels = SEESAW_PANELS if runs[0].seesaw else PANELS
+    kick = "tap" if runs[0].seesaw else "poke"
     fig = plt.figure(figsize=(10, 11))
-    grid = fig.add_gridspec(5, 1, height_ratios=[1, 1, 1, 1, 0.9])
-    for k, (name, ylabel) in enumerate(PANELS):
+    grid = fig.add_gridspec(len(panels) + 1, 1, height_ratios=[1] * len(panels) + [0.9])
+    for k, (name, ylabel) in enumerate(panels):
         ax = fig.add_subplot(grid[k])
         for run in runs:
             t, y = run.aligned(name)
@@ -237,9 +287,9 @@ def plot_comparison(runs: list[ComparedRun], path: Path, *, window: tuple[float,
             ax.set_ylim(-11, 11)  # the amplifier's range: a runaway command does not flatten the plot
         if k == 0:
             ax.legend(loc="upper right", fontsize=8)
-            ax.set_title("aligned at the poke (t = 0)")
-    ax.set_xlabel("time since the poke (s)")
-    table_ax = fig.add_subplot(grid[4])
+            ax.set_title(f"aligned at the {kick} (t = 0)")
+    ax.set_xlabel(f"time since the {kick} (s)")
+    table_ax = fig.add_subplot(grid[len(panels)])
     table_ax.axis("off")
     cells = [[_fmt(r.metrics.get(key), unit) for r in runs] for key, _, unit, _ in TABLE]
     table = table_ax.table(cellText=cells, rowLabels=[label for _, label, _, _ in TABLE], colLabels=[r.label for r in runs], loc="center")
@@ -282,6 +332,9 @@ def compare_runs(paths: list[str | Path], out_dir: Path, *, Lp: float | None = N
     from pendulab.analysis.results import atomic_write
 
     runs = [load_compared(p, Lp=Lp) for p in paths]
+    if len({run.seesaw for run in runs}) > 1:
+        kinds = ", ".join(f"{run.label}: {'seesaw' if run.seesaw else 'pendulum'}" for run in runs)
+        raise UserError(f"these runs are of different plants ({kinds}); compare seesaw runs with seesaw runs")
     text = table_text(runs)
     out_dir.mkdir(parents=True, exist_ok=True)
     txt = atomic_write(out_dir / "comparison.txt", lambda f: f.write((text + "\n").encode()))
@@ -297,6 +350,6 @@ def compare_with_simulation(out_dir: Path, spec: Any, *, metrics: Mapping[str, A
     sim_dir = out_dir / "simulation"
     result = simulate(spec, meta={"source": "simulation", "pendulum": "", "calibration": ""})
     result.write(sim_dir)
-    text, _ = compare_runs([sim_dir, out_dir], out_dir, Lp=result.spec.parameters().Lp)
+    text, _ = compare_runs([sim_dir, out_dir], out_dir, Lp=getattr(result.spec.parameters(), "Lp", None))
     print(text)
     return text

@@ -58,8 +58,36 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_overwrite_option(parser)
     parser.add_argument("--plot", action="store_true", help="also write PNG plots")
     parser.add_argument("--compare", action="store_true", help="also simulate the same controller at the same delay and write the comparison")
-    parser.add_argument("--poke", metavar="MAG,DUR,START", help="the poke to simulate for --compare (default 50,0.005,1; the rig's poke is detected)")
+    parser.add_argument("--poke", metavar="MAG,DUR,START", help="the poke (the seesaw: tap) to simulate for --compare (default 50,0.005,1; the seesaw's 3.3,0.1,1; the rig's is detected)")
     parser.set_defaults(func=run)
+
+
+def check_rig_plant(counts_per_rad: float, *, seesaw: bool, port: str) -> None:
+    """Refuse (UserError) a rig whose angle channel is the other plant's encoder.
+
+    The seesaw's pivot encoder sits on the pendulum's channel behind a 3:1 gear: its rig says so in the IDENTITY,
+    3 x 4096 counts per turn (the firmware's seesaw jumper, or ``rig-emulator --plant seesaw``).
+
+    Examples
+    --------
+    >>> check_rig_plant(1955.7, seesaw=True, port="COM3")
+    >>> check_rig_plant(651.9, seesaw=True, port="COM3")
+    Traceback (most recent call last):
+    pendulab.errors.UserError: the rig at COM3 reads its angle at 651.9 counts per rad, the pendulum's encoder; the seesaw's is ...
+    >>> check_rig_plant(1955.7, seesaw=False, port="COM3")
+    Traceback (most recent call last):
+    pendulab.errors.UserError: the rig at COM3 is the seesaw (1955.7 counts per rad on its angle channel: ...
+    """
+    from pendulab.model.seesaw import SEESAW_COUNT
+
+    on_seesaw = abs(counts_per_rad * SEESAW_COUNT - 1.0) < 0.01
+    if seesaw and not on_seesaw:
+        raise UserError(f"the rig at {port} reads its angle at {counts_per_rad:.1f} counts per rad, the pendulum's encoder; the seesaw's "
+                        f"is {1 / SEESAW_COUNT:.1f} (3 x 4096 per turn behind its 3:1 gear): fit the seesaw's jumper (firmware/README.md) "
+                        "or run --plant pendulum")
+    if on_seesaw and not seesaw:
+        raise UserError(f"the rig at {port} is the seesaw ({counts_per_rad:.1f} counts per rad on its angle channel: the pivot encoder "
+                        "behind the 3:1 gear); run 'pendulab lab --plant seesaw', or remove the seesaw's jumper on a pendulum rig")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -86,9 +114,6 @@ def run(args: argparse.Namespace) -> int:
     if seesaw:
         from pendulab.cli.simulate import seesaw_spec_from_args
 
-        if args.compare or args.plot:
-            raise UserError("--compare and --plot are the pendulum's in the lab; for the seesaw run 'pendulab simulate --plant seesaw "
-                            "--delay N' and compare its tilt (run.mat's theta) with the lab's")
         # The same loop as simulated; the supervisor waits for 's' (the seesaw held level) and reads the tilt as it
         # is (no rig_mode: its encoder reads 0 level, not the pendulum's 0 hanging).
         spec = seesaw_spec_from_args(args, Timing(method=args.method), Poke.parse(args.poke) if args.poke else None)
@@ -120,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
             period = identity.period_us * 1e-6
             say(f"rig at {args.port}: protocol {identity.protocol}, firmware {identity.fw_major}.{identity.fw_minor}.{identity.fw_patch}, "
                 f"boot id {identity.boot_id:#010x}, period {identity.period_us} us")
+            check_rig_plant(identity.pend_counts_per_rad, seesaw=seesaw, port=args.port)
             # The controller is realized before anything moves: a controller the rules refuse never enables the motor.
             # The rig's own transport delay is physical: the system has none (timing.delay = 0 here).
             spec = spec.replace(timing=Timing(stop_time=spec.poke.start + 4.0, step=period, method=args.method)).validate()
@@ -157,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
             from pendulab.analysis.results import read_run
 
             columns, _ = read_run(out_dir)
-            plot_run(columns, out_dir, title=f"rig, {args.pendulum} pendulum", poke_start=metrics.get("poke_start_detected_s") or 0.0)
+            plot_run(columns, out_dir, title="rig, seesaw" if seesaw else f"rig, {args.pendulum} pendulum",
+                     poke_start=metrics.get("poke_start_detected_s") or 0.0)
         if args.compare:
             from pendulab.analysis.compare import compare_with_simulation
 

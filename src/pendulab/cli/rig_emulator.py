@@ -56,7 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       help="the cart or pendulum encoder's count freezes S s after the host connects")
     parser.add_argument("--tcp", type=int, metavar="PORT", help="serve one host on TCP 127.0.0.1:PORT instead of a pty (prints socket://...)")
     parser.add_argument("--firmware", nargs="?", const="", metavar="HEX",
-                        help="run the real firmware in simavr with the digital twin instead (default: the .hex 'make -C firmware' builds)")
+                        help="run the real firmware in simavr with the digital twin (pendulum or seesaw) instead (default: the .hex 'make -C firmware' builds)")
     parser.add_argument("--seed", type=int, help="random seed (byte errors, jitter, boot id)")
     parser.set_defaults(func=run)
 
@@ -106,8 +106,6 @@ def emulator_options(args: argparse.Namespace):  # -> EmulatorOptions
 
         if args.pendulum != "long":
             raise UserError(f"--pendulum {args.pendulum} is the pendulum rig's; the seesaw has none: drop it")
-        if args.firmware is not None:
-            raise UserError("--firmware runs the pendulum rig's firmware twin; the seesaw's is not built: drop --firmware")
         plant = Plant(kind="seesaw", cart=args.cart, calibration=str(args.calibration) if args.calibration else None,
                       overrides=friction)
     else:

@@ -7,7 +7,7 @@ The same Controller and Supervisor FMUs as the pendulum's loop, wired by name to
   cart position into ``x_measured``;
 - the supervisor watches the tilt as it watches the pendulum's angle, with the seesaw's limits: the cart at
   +/-0.35 m (``setup_ip02_ssw.m``: ``X_MAX``) and the tilt at 10 degrees, before the seesaw rests on its
-  tilt stop (11.5 degrees).
+  tilt stop (11.5 degrees); and its start rule: a start only with the seesaw level (within the capture window).
 
 Examples
 --------
@@ -41,6 +41,9 @@ CONNECTIONS = (
 #: The seesaw's supervisor limits: the cart as in Quanser's lab (X_MAX = 0.35 m), the tilt at the low end
 #: of the supervisor's settable range, short of the tilt stop.
 SUPERVISOR_LIMITS = {"x_max": 0.35, "alpha_max": math.radians(10.0)}
+#: The seesaw's start rule (Quanser's lab: hold it level, then start): a start is refused unless the tilt is within
+#: the supervisor's capture window (2 degrees).
+SUPERVISOR_START = {"level_start": True}
 #: Recorded signals -> the column names of run.mat / run.csv.
 RECORDED = {
     "seesaw.x": "x",
@@ -86,8 +89,8 @@ TAP_DEFAULT = _tap_default()
 
 
 def supervisor_start_values(supervisor: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The seesaw's Supervisor FMU start values: :data:`SUPERVISOR_LIMITS`, then the run's own settings."""
-    return {**SUPERVISOR_LIMITS, **dict(supervisor or {})}
+    """The seesaw's Supervisor FMU start values: :data:`SUPERVISOR_LIMITS` and :data:`SUPERVISOR_START`, then the run's own settings."""
+    return {**SUPERVISOR_LIMITS, **SUPERVISOR_START, **dict(supervisor or {})}
 
 
 def verdict_limits(params: Any = None, supervisor: Mapping[str, Any] | None = None) -> Any:

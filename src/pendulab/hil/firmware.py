@@ -2,7 +2,8 @@
 
 ``firmware/`` (a checkout of pendulab) holds the C firmware for the Arduino Mega 2560 and
 ``firmware/twin/``, a simavr board program that runs that firmware instruction by instruction with
-its pins wired to the plant (Plant.fmu's own CasADi-generated C code). Linux only (simavr).
+its pins wired to the plant (Plant.fmu's own CasADi-generated C code, or Seesaw.fmu's for the seesaw:
+its tilt encoder on the pendulum's channel, the board's seesaw jumper grounded). Linux only (simavr).
 
 Examples
 --------
@@ -101,6 +102,9 @@ def twin_command(hex_path: Path, options: EmulatorOptions) -> list[str]:
     >>> command = twin_command(Path("rig.hex"), EmulatorOptions(raise_after=2.0, seed=7))
     >>> command[1:3], command[4:]
     (['rig.hex', '--params'], ['--raise-after', '2.0', '--seed', '7'])
+    >>> from pendulab.model.seesaw import SeesawParameters
+    >>> twin_command(Path("rig.hex"), EmulatorOptions(params=SeesawParameters(), plant="seesaw"))[-2:]
+    ['--plant', 'seesaw']
     """
     import dataclasses
 
@@ -117,6 +121,8 @@ def twin_command(hex_path: Path, options: EmulatorOptions) -> list[str]:
         command += ["--seed", str(options.seed)]
     for which, (kind, after) in options.encoder_faults.items():
         command += [f"--{kind}-encoder", f"{which},{after!r}"]
+    if options.plant != "pendulum":
+        command += ["--plant", options.plant]
     return command
 
 

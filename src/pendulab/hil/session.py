@@ -381,6 +381,9 @@ class LabSession:
                 if sample.status & P.ST_LATE:
                     timing.late_commands += 1
                 new_state = int(values["supervisor.state"])
+                if command == COMMANDS["start"] and self.seesaw and STATES.get(new_state) in ("idle", "tripped"):
+                    # (the supervisor's start rule: level_start; its own log is off in the lab)
+                    self.announce(f"[{t:8.3f} s] start refused: the seesaw's tilt is {math.degrees(theta):+.1f} deg; hold it level, then press s")
                 alpha = self.upright(theta)
                 log.append((t, sample.tick, x, theta, alpha, values["controller.V_command"], sample.voltage_mv / 1000.0,
                             new_state, sample.status, (sent - received) * 1e3, sample.late, values["supervisor.r"],
@@ -542,7 +545,7 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
     release = hand_release_time(columns, at_start=seesaw) if t.size else None
     poke = None
     if release is not None:
-        poke = detect_poke(t, columns["alpha"], q_alpha=q_alpha, after=release + RELEASE_SETTLE, before=cut)
+        poke = detect_poke(t, columns["alpha"], q_alpha=q_alpha, after=release + RELEASE_SETTLE, before=cut, long_pulse=seesaw)
     last = cut if cut is not None else (float(t[-1]) if t.size else 0.0)
     metrics: dict[str, Any]
     if poke is not None and t.size > 10 and poke < last - 0.05:

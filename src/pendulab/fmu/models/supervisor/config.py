@@ -159,6 +159,9 @@ def spec() -> ModelSpec:
                  description="Start at initialization (simulation); false: wait for the start command (lab)"),
         Variable("calibration_mode", "Boolean", "parameter", start=False, initial="exact",
                  description="Pendulum removed: no angle limit, no capture window, start only with the cart centred"),
+        Variable("level_start", "Boolean", "parameter", start=False, initial="exact",
+                 description="The seesaw's start rule: a start is accepted only while |alpha_measured| (its tilt) is below "
+                             "capture_window: hold it level, then start"),
         Variable("motor_enable", "Boolean", "output", description="Amplifier enable: true only while running"),
     ]
     defines = {

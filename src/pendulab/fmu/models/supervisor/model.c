@@ -127,9 +127,14 @@ static int limits_ok(const Instance *comp, double alpha, char *why, size_t n) {
     return 1;
 }
 
-/* Calibration mode: a start needs the cart centred. */
-static int centred(const Instance *comp, char *why, size_t n) {
+/* Calibration mode: a start needs the cart centred. The seesaw (level_start): a start needs it level. */
+static int start_rule(const Instance *comp, double alpha, char *why, size_t n) {
     double x = comp->r[VR_x_measured];
+    if (comp->b[VR_level_start] && !(fabs(alpha) < comp->r[VR_capture_window])) {
+        snprintf(why, n, "the seesaw is not level: |tilt| = %.1f deg, must be < %.1f deg (capture_window); hold it level, then start",
+                 DEG(fabs(alpha)), DEG(comp->r[VR_capture_window]));
+        return 0;
+    }
     if (!CALIBRATION(comp) || fabs(x) < comp->r[VR_centre_tolerance]) return 1;
     snprintf(why, n, "calibration mode needs the cart centred: |x| = %.4f m, must be < %.4f m; centre the cart first",
              fabs(x), comp->r[VR_centre_tolerance]);
@@ -153,7 +158,7 @@ static void handle_command(Instance *comp, Memory *m, int command, double alpha,
     switch (command) {
     case CMD_START:
         if (m->state == STATE_IDLE || m->state == STATE_PAUSED) {
-            if (!centred(comp, why, sizeof(why))) {
+            if (!start_rule(comp, alpha, why, sizeof(why))) {
                 if (log) announce(comp, t, "start refused: %s", why);
             } else {
                 if (m->state == STATE_IDLE) start_swing_clock(m, t);
@@ -161,7 +166,7 @@ static void handle_command(Instance *comp, Memory *m, int command, double alpha,
             }
         } else if (m->state == STATE_TRIPPED) {
             /* Start after a trip re-arms and starts in one go, under the same condition as re-arm. */
-            if (!limits_ok(comp, alpha, why, sizeof(why)) || !centred(comp, why, sizeof(why))) {
+            if (!limits_ok(comp, alpha, why, sizeof(why)) || !start_rule(comp, alpha, why, sizeof(why))) {
                 if (log) announce(comp, t, "start refused, still tripped (%s): %s", TRIP_NAMES[m->trip_reason], why);
             } else {
                 clear_trip(m);
