@@ -19,6 +19,10 @@ with drawn friction, damping and delay; 5 s each at 1 kHz, the lab's 220 rad/s^2
   from start to ``results.parquet``: worker start-up, FMU loading, metrics, Parquet parts and the
   final table all included.
 
+Also measured: one worker's start-up (a worker process that starts, runs one run and ends, less one
+run), which a sweep pays once per worker; the sweep's rate without it is printed beside the measured
+one as what each further run costs (a derived figure: a larger sweep tends to it).
+
 A rate is runs per core-second: runs divided by the CPU time of every process involved (the sweep's
 own process and its workers, from ``getrusage``), so that it does not depend on how busy the shared
 machine is; wall-clock rates are printed beside it. The one-by-one and bare-loop variants run in
@@ -69,6 +73,19 @@ delay = {{ choice = [1, 2, 3] }}
 def cpu_children() -> float:
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     return usage.ru_utime + usage.ru_stime
+
+
+def worker_startup(spec, run) -> float:
+    """Core-seconds of one sweep worker process that starts, runs ``run`` and ends (its imports, the FMUs loaded)."""
+    from pendulab.sweep.sandbox import Sandbox
+
+    c0 = cpu_children()
+    sandbox = Sandbox()
+    try:
+        sandbox.run_batch(spec, [run])
+    finally:
+        sandbox.close()
+    return cpu_children() - c0
 
 
 def main() -> int:
@@ -126,6 +143,7 @@ def main() -> int:
         bare.append(bare_loop())
         reuse.append(reused())
     single_s, bare_s, reuse_s = statistics.median(single), statistics.median(bare), statistics.median(reuse)
+    startup = statistics.median(worker_startup(spec, runs[0]) for _ in range(args.repeats)) - reuse_s
 
     with tempfile.TemporaryDirectory(prefix="pendulab-bench-sweep-") as tmp:
         c0, k0, w0 = time.process_time(), cpu_children(), time.perf_counter()
@@ -158,8 +176,16 @@ def main() -> int:
     print(f"ceiling of sweep / one-by-one (one-by-one / bare loop): {single_s / bare_s:.2f}x")
     # Where the rest goes: a run's own work beyond stepping (controller realization looked up, the
     # plant's parameters, metrics and verdict, meta) and the engine's (batches, worker processes, Parquet).
+    per_run = 1 / sweep_rate
+    started = args.workers * startup / n
     print(f"per run beyond the bare loop: {1e3 * (reuse_s - bare_s):.2f} core-ms in simulate itself (metrics, verdict, "
-          f"parameters), {1e3 * (1 / sweep_rate - reuse_s):.2f} core-ms in the sweep's engine (workers, batches, Parquet)")
+          f"parameters), {1e3 * (per_run - reuse_s):.2f} core-ms in the sweep's engine: {1e3 * started:.2f} of them the "
+          f"workers' start-up ({startup:.2f} core-s each: Python, numpy, fmpy, pendulab, the three FMUs loaded), "
+          f"{1e3 * (per_run - reuse_s - started):.2f} batches, pipes and Parquet")
+    # The start-up is paid once per worker: what each further run costs is the sweep's rate without it.
+    marginal = 1 / (per_run - started)
+    print(f"sweep without its workers' start-up (a larger sweep tends to it): {marginal:.1f} runs per core-s, "
+          f"{marginal / bare_rate:.2f}x the bare loop, {marginal / single_rate:.2f}x one by one")
     return 0 if ok_single and ok_bare else 1
 
 

@@ -16,6 +16,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 from typing import Any, Iterator, Mapping
@@ -41,21 +42,32 @@ def range_text(minimum: float, maximum: float, unit: str) -> str:
     return f"{minimum:g} to {maximum:g}{unit}"
 
 
+@functools.cache
+def _ranges(cls: type) -> tuple[tuple[str, str, float, float, bool], ...]:
+    """``(name, unit, min, max, positive)`` of every ``_p`` field of the dataclass ``cls``, in order (read once:
+    a sweep builds parameters for every run)."""
+    return tuple((f.name, f.metadata["unit"], f.metadata["min"], f.metadata["max"], f.metadata["positive"]) for f in fields(cls))
+
+
+@functools.cache
+def _names(cls: type) -> tuple[str, ...]:
+    return tuple(r[0] for r in _ranges(cls))
+
+
 def check_ranges(values: Any, owner: str = "parameter") -> None:
     """Raise :class:`ParameterError` (one line: name, value, allowed range) for the first field of the
     dataclass ``values`` that is not a finite number within its ``_p`` range."""
-    for f in fields(values):
-        value, unit = getattr(values, f.name), f.metadata["unit"]
+    for name, unit, low, high, positive in _ranges(type(values)):
+        value = getattr(values, name)
         if not isinstance(value, (int, float)) or isinstance(value, bool):
-            raise ParameterError(f"{owner} {f.name}={value!r} is not a number; give a real value in {unit}")
+            raise ParameterError(f"{owner} {name}={value!r} is not a number; give a real value in {unit}")
         if not math.isfinite(value):
-            raise ParameterError(f"{owner} {f.name}={value} is not finite; give a finite value in {unit}")
-        low, high = f.metadata["min"], f.metadata["max"]
+            raise ParameterError(f"{owner} {name}={value} is not finite; give a finite value in {unit}")
         if not low <= value <= high:
             negative = " (negative)" if value < 0 <= low else ""
-            raise ParameterError(f"{owner} {f.name}={value}{negative} is outside its range {range_text(low, high, unit)}")
-        if f.metadata["positive"] and value <= 0:
-            raise ParameterError(f"{owner} {f.name}={value} must be > 0 {unit}")
+            raise ParameterError(f"{owner} {name}={value}{negative} is outside its range {range_text(low, high, unit)}")
+        if positive and value <= 0:
+            raise ParameterError(f"{owner} {name}={value} must be > 0 {unit}")
 
 
 #: Conditions between parameters, in the one syntax that Python and C both read (comparisons, ``+ - * /``,
@@ -65,6 +77,8 @@ CONSTRAINTS: tuple[tuple[str, str], ...] = (
     ("lp <= Lp", "the centre of gravity lies between the pivot and the tip: set lp <= Lp"),
     ("Mp == 0 or Ip + Mp * lp * lp > 0", "the pendulum has mass but no inertia: set lp > 0 or Ip > 0"),
 )
+#: The conditions compiled once.
+_CONSTRAINT_CODE = tuple((compile(condition, "<constraint>", "eval"), condition, why) for condition, why in CONSTRAINTS)
 
 
 @dataclass(frozen=True)
@@ -118,8 +132,9 @@ class PlantParameters:
 
     def __post_init__(self) -> None:
         check_ranges(self)
-        for condition, why in CONSTRAINTS:
-            if not eval(condition, {"__builtins__": {}}, self.as_dict()):  # noqa: S307 - our own table's text
+        values = self.as_dict()
+        for code, condition, why in _CONSTRAINT_CODE:
+            if not eval(code, {"__builtins__": {}}, values):  # noqa: S307 - our own table's text
                 raise ParameterError(f"parameters violate {condition}: {why}")
 
     # ------------------------------------------------------------------ construction
@@ -168,7 +183,7 @@ class PlantParameters:
     @classmethod
     def names(cls) -> tuple[str, ...]:
         """Field names in their fixed order (the order of the CasADi parameter vector)."""
-        return tuple(f.name for f in fields(cls))
+        return _names(cls)
 
     @classmethod
     def describe(cls) -> Iterator[tuple[str, float, str, str]]:
