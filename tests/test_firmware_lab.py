@@ -196,7 +196,9 @@ SEESAW_STOP = 10.5
 
 @pytest.fixture(scope="module")
 def seesaw_twin_run(tmp_path_factory):
-    """``lab --plant seesaw --demo`` against the firmware twin's seesaw (one session; one more if the host was too slow).
+    """``lab --plant seesaw --demo`` against the firmware twin's seesaw (one session; up to two more if the host was too
+    slow for the link: on a host with load 4-5 on 2 cores about one 13 s session in two ended by the rig's watchdog
+    while the lab answered within 0.3 ms, p99, of reading each sample, as the emulator's seesaw test allows three).
 
     The twin's operator lifts the seesaw level as the host connects (--raise-after 0; 0.6 s), before the lab zeroes the
     encoders (after it has measured the delay, at least 1 s of samples): the tilt encoder is zeroed level.
@@ -207,7 +209,7 @@ def seesaw_twin_run(tmp_path_factory):
     for name in ("Seesaw", "Controller", "Supervisor"):
         ensure_fmu(name)
     build_firmware(), build_twin()
-    for attempt in range(2):
+    for attempt in range(3):
         out = tmp_path_factory.mktemp("fwseesaw") / "run"
         with emulator("--firmware", "--plant", "seesaw", "--raise-after", "0", "--poke", SEESAW_TAP) as emu:
             result = lab("--port", emu.port, "--plant", "seesaw", "--demo", "--max-delay", "8", "--stop-time", str(SEESAW_STOP),
