@@ -104,3 +104,11 @@ def seesaw_fmu() -> Path:
     from pendulab.fmu.build import ensure_fmu
 
     return ensure_fmu("Seesaw")
+
+
+@pytest.fixture(scope="session")
+def seesaw3_fmu() -> Path:
+    """Path of ``fmus/Seesaw3.fmu`` (the seesaw as an FMI 3.0 FMU), built first if missing or out of date."""
+    from pendulab.fmu.build import ensure_fmu
+
+    return ensure_fmu("Seesaw3")

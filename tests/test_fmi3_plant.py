@@ -1,6 +1,6 @@
 """Plant3.fmu, the plant as an FMI 3.0 FMU (issue 11, part 3 and must-show 2).
 
-The same model.c and CasADi code as Plant.fmu behind fmi3_wrapper.c: validation is clean, its trajectories
+The same C model (state_space.c) and CasADi code as Plant.fmu behind fmi3_wrapper.c: validation is clean, its trajectories
 in fmpy equal the FMI 2.0 plant's (Co-Simulation and Model Exchange with CVode, smooth and with events),
 1000 instantiate/free cycles do not grow the process, and its modelDescription.xml is the FMI 2.0 variable
 table's. The SSP export can name it instead of the FMI 2.0 plant.
@@ -56,7 +56,7 @@ def test_model_exchange_and_co_simulation_with_both_platforms(plant3_fmu):
     assert md.numberOfContinuousStates == len(STATES)
     assert md.numberOfEventIndicators == len(EVENT_INDICATORS)
     names = set(zipfile.ZipFile(plant3_fmu).namelist())
-    assert {"binaries/x86_64-linux/Plant3.so", "sources/buildDescription.xml", "sources/fmi3_wrapper.c", "sources/model.c"} <= names
+    assert {"binaries/x86_64-linux/Plant3.so", "sources/buildDescription.xml", "sources/fmi3_wrapper.c", "sources/state_space.c"} <= names
 
 
 def test_variables_are_the_fmi2_plants(plant_fmu, plant3_fmu):

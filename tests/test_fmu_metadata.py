@@ -30,16 +30,16 @@ from pendulab.fmu.build import model_spec
 from pendulab.fmu.description import model_description_xml
 from pendulab.fmu.units import UNITS
 from pendulab.model.parameters import PlantParameters
-from pendulab.model.plant import OUTPUTS, REGIME, STATES, PlantModel
+from pendulab.model.plant import OUTPUTS, STATES, PlantModel
 
 lxml_etree = pytest.importorskip("lxml.etree")
 SCHEMAS = Path(__import__("fmpy").__file__).parent / "schema"
 
 
 @pytest.fixture(scope="module")
-def fmus(plant_fmu, plant3_fmu, controller_fmu, supervisor_fmu, seesaw_fmu) -> dict[str, Path]:
+def fmus(plant_fmu, plant3_fmu, controller_fmu, supervisor_fmu, seesaw_fmu, seesaw3_fmu) -> dict[str, Path]:
     return {"Plant": plant_fmu, "Plant3": plant3_fmu, "Controller": controller_fmu, "Supervisor": supervisor_fmu,
-            "Seesaw": seesaw_fmu}
+            "Seesaw": seesaw_fmu, "Seesaw3": seesaw3_fmu}
 
 
 @pytest.fixture(scope="module")
@@ -61,53 +61,59 @@ def declared(description, kind: str = "outputs") -> dict[str, dict[str, str]]:
 
 
 # ---------------------------------------------------------------- dependencies: CasADi
-def casadi_structure() -> dict[str, set[str]]:
-    """What the plant's outputs and derivatives depend on by the Jacobian structure of the CasADi functions
+def casadi_structure(model) -> dict[str, set[str]]:
+    """What a cart model's outputs and derivatives depend on by the Jacobian structure of its CasADi functions
     (derivatives: Co-Simulation's law and Model Exchange's law with frozen switches together)."""
-    model = PlantModel()
-    state, V, p, t, _ = model._symbols()
+    ode, outputs_function, _, ode_regime, _, _ = model.functions
+    states = [f"x{k}" for k in range(ode.size1_in(0))]
+    state, V, t = ca.SX.sym("state", len(states)), ca.SX.sym("V"), ca.SX.sym("t")
+    p, regime = ca.SX.sym("p", ode.size1_in(2)), ca.SX.sym("regime", ode_regime.size1_in(4))
     knowns = ca.vertcat(state, V)
-    names = [*STATES, "V"]
-    regime = ca.SX.sym("regime", len(REGIME))
-    rows = {s: {s} for s in STATES}
-    outputs = ca.jacobian_sparsity(model.outputs(state, V, p, t), knowns)
-    for i, name in enumerate(OUTPUTS):
-        rows[name] = {names[j] for j in range(len(names)) if outputs.has_nz(i, j)}
-    for law in (model.ode(state, V, p, t), model.ode_regime(state, V, p, t, regime)):
+    rows = {}
+    outputs = ca.jacobian_sparsity(outputs_function(state, V, p, t), knowns)
+    for i in range(outputs.size1()):
+        rows[f"y{i}"] = {j for j in range(knowns.numel()) if outputs.has_nz(i, j)}
+    for law in (ode(state, V, p, t), ode_regime(state, V, p, t, regime)):
         structure = ca.jacobian_sparsity(law, knowns)
-        for i, s in enumerate(STATES):
-            rows.setdefault(f"der({s})", set()).update(names[j] for j in range(len(names)) if structure.has_nz(i, j))
+        for i in range(len(states)):
+            rows.setdefault(f"d{i}", set()).update(j for j in range(knowns.numel()) if structure.has_nz(i, j))
     return rows
 
 
-@pytest.mark.parametrize("name", ["Plant", "Plant3"])
-def test_plant_dependencies_are_the_casadi_jacobian_structure(fmus, name):
+def cart_model(name: str):
+    """The CasADi model, state names and output names of a cart FMU (Plant/Plant3, Seesaw/Seesaw3)."""
+    from pendulab.model import seesaw
+
+    if name.startswith("Plant"):
+        return PlantModel(), STATES, OUTPUTS
+    return seesaw.SeesawModel(), seesaw.STATES, seesaw.OUTPUTS
+
+
+@pytest.mark.parametrize("name", ["Plant", "Plant3", "Seesaw", "Seesaw3"])
+def test_cart_model_dependencies_are_the_casadi_jacobian_structure(fmus, name):
     description = read_model_description(str(fmus[name]))
-    expected = casadi_structure()
+    model, states, output_names = cart_model(name)
+    knowns = [*states, "V"]
+    table = casadi_structure(model)
+    expected = {s: {s} for s in states}
+    expected.update({name: {knowns[j] for j in table[f"y{i}"]} for i, name in enumerate(output_names)})
+    expected.update({f"der({s})": {knowns[j] for j in table[f"d{i}"]} for i, s in enumerate(states)})
     outputs, derivatives = declared(description), declared(description, "derivatives")
-    assert set(outputs) == {*STATES, *OUTPUTS} and set(derivatives) == {f"der({s})" for s in STATES}
+    assert set(outputs) == {*states, *output_names} and set(derivatives) == {f"der({s})" for s in states}
     for unknown, row in {**outputs, **derivatives}.items():
         assert row is not None and set(row) == expected[unknown], unknown
     # The measured outputs depend on states only: nothing feeds the voltage through to them.
-    assert outputs["alpha_measured"] == {"alpha": "dependent"} and outputs["x_measured"] == {"x": "dependent"}
-    assert outputs["x"] == {"x": "constant"} and derivatives["der(alpha)"] == {"alphadot": "constant"}
+    angle = states[2]
+    assert outputs[f"{angle}_measured"] == {angle: "dependent"} and outputs["x_measured"] == {"x": "dependent"}
+    assert outputs["x"] == {"x": "constant"}
+    assert f"{angle}dot" in derivatives[f"der({angle})"]
+    if angle == "alpha":  # the pendulum's angle has no stop; the seesaw's rate is zeroed at its tilt stops
+        assert derivatives["der(alpha)"] == {"alphadot": "constant"}
+    assert "V" in derivatives["der(xdot)"]
     # At initialization the encoder steps count too.
     initial = declared(description, "initialUnknowns")
-    assert set(initial["alpha_measured"]) == {"alpha", "q_alpha"} and set(initial["V_applied"]) == {"V", "V_max"}
-
-
-def test_seesaw_dependencies_are_the_casadi_jacobian_structure(fmus):
-    """Co-Simulation only: at a communication point only the voltage is a known (the states are the FMU's own)."""
-    from pendulab.model.seesaw import OUTPUTS as SEESAW_OUTPUTS
-    from pendulab.model.seesaw import SeesawModel, SeesawParameters
-
-    state, V, t = ca.SX.sym("state", 4), ca.SX.sym("V"), ca.SX.sym("t")
-    p = ca.SX.sym("p", len(SeesawParameters.names()))
-    structure = ca.jacobian_sparsity(SeesawModel().outputs(state, V, p, t), V)
-    outputs = declared(read_model_description(str(fmus["Seesaw"])))
-    for i, name in enumerate(SEESAW_OUTPUTS):
-        assert set(outputs[name]) == ({"V"} if structure.has_nz(i, 0) else set()), name
-    assert set(outputs["V_applied"]) == {"V"} and outputs["theta_measured"] == {}
+    step = {"alpha": "q_alpha", "theta": "q_theta"}[angle]
+    assert set(initial[f"{angle}_measured"]) == {angle, step} and set(initial["V_applied"]) == {"V", "V_max"}
 
 
 def test_controller_feeds_its_inputs_through_d(fmus):
@@ -285,7 +291,7 @@ def test_the_wired_loop_has_no_algebraic_loop(fmus):
 
 
 # ---------------------------------------------------------------- the schemas
-ALL = ["Plant", "Plant3", "Controller", "Supervisor", "Seesaw"]
+ALL = ["Plant", "Plant3", "Controller", "Supervisor", "Seesaw", "Seesaw3"]
 
 
 @pytest.mark.parametrize("name", ALL)

@@ -3,6 +3,7 @@
 One plain C host (tests/hosts/fmu_host.c) is built natively and with mingw-w64; each runs the same
 reference cases (the plant's open-loop case, plant and controller in a loop) on its platform's binaries.
 The FMI 3.0 plant (Plant3) has its own host (tests/hosts/fmi3_host.c): Co-Simulation and Model Exchange.
+The seesaw (issue 20) runs in both hosts in the plant's place: Seesaw.fmu in fmu_host.c, Seesaw3.fmu in fmi3_host.c.
 """
 
 from __future__ import annotations
@@ -33,16 +34,17 @@ def binaries(fmu: Path) -> dict[str, str]:
     return {platform_dir: f"binaries/{platform_dir}/{fmu.stem}{suffix}" for platform_dir, suffix in suffixes.items()}
 
 
-def test_every_fmu_carries_both_platforms(plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu):
+def test_every_fmu_carries_both_platforms(plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu, seesaw_fmu, seesaw3_fmu):
     """A missing binary for either platform fails here (an FMU built without mingw-w64 has no win64)."""
-    for fmu in (plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu):
+    for fmu in (plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu, seesaw_fmu, seesaw3_fmu):
         names = set(zipfile.ZipFile(fmu).namelist())
         for platform_dir, path in binaries(fmu).items():
             assert path in names, (fmu.name, platform_dir)
 
 
-def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu, tmp_path):
-    for fmu in (plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu):
+def test_win64_dlls_import_only_what_windows_has(plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu, seesaw_fmu, seesaw3_fmu,
+                                                 tmp_path):
+    for fmu in (plant_fmu, controller_fmu, supervisor_fmu, plant3_fmu, seesaw_fmu, seesaw3_fmu):
         dll = tmp_path / f"{fmu.stem}.dll"
         dll.write_bytes(zipfile.ZipFile(fmu).read([p for p in binaries(fmu).values() if p.endswith(".dll")][0]))
         dump = subprocess.run(["x86_64-w64-mingw32-objdump", "-p", str(dll)], capture_output=True, text=True, check=True).stdout
@@ -71,14 +73,14 @@ def _run_host(source: Path, windows: bool, folder: Path, arguments: list[str], w
     return [np.array([float(v) for v in line.split()]) for line in lines[-2:]]
 
 
-def _arguments(fmus: tuple[Path, Path, Path], folder: Path, platform_dir: str) -> list[str]:
+def _arguments(fmus: tuple[Path, Path, Path], folder: Path, platform_dir: str, angle: str = "alpha") -> list[str]:
     args = []
     for fmu in fmus:
         binary = folder / f"{fmu.stem}{SUFFIX[platform_dir]}"
         binary.write_bytes(zipfile.ZipFile(fmu).read(f"binaries/{platform_dir}/{fmu.stem}{SUFFIX[platform_dir]}"))
         args += [str(binary), read_model_description(str(fmu)).guid]
     plant, ctl, sup = ({v.name: v.valueReference for v in read_model_description(str(f)).modelVariables} for f in fmus)
-    refs = [plant[n] for n in ("V", "x", "xdot", "alpha", "alphadot", "alpha_measured", "x_measured")]
+    refs = [plant[n] for n in ("V", "x", "xdot", angle, f"{angle}dot", f"{angle}_measured", "x_measured")]
     refs += [ctl[n] for n in ("alpha_measured", "V_command", "n", "A[1,1]", "B[1]", "C[1]", "D")]
     refs += [sup[n] for n in ("V_command", "alpha_measured", "x_measured", "V")]
     return args + ["1500"] + [str(r) for r in refs]
@@ -128,6 +130,41 @@ def test_fmi3_plant_win64_under_wine_equals_linux64_and_fmi2(plant_fmu, plant3_f
     fmi2 = hanging_plant_run(plant_fmu, steps)[-1]  # fmi3_host.c's open-loop case on the FMI 2.0 plant, through fmpy
     print("FMI 2.0 plant, same case:", fmi2, "max |difference|", np.max(np.abs(fmi2 - linux[0])))
     np.testing.assert_allclose(linux[0], fmi2, rtol=0, atol=1e-12)
+
+
+@pytest.mark.skipif(WINE is None or shutil.which(WIN64_COMPILER) is None, reason="needs mingw-w64 and wine64 (.ci/run installs both)")
+def test_seesaw_win64_under_wine_equals_linux64(seesaw_fmu, seesaw3_fmu, controller_fmu, supervisor_fmu, tmp_path, wineprefix):
+    """The seesaw's win64 binaries under Wine equal its linux64 ones to 1e-12: Seesaw.fmu in fmu_host.c's two cases
+    (12 V sine open loop from a 0.05 rad tilt: onto the track's stop; the loop of three FMUs from 0.01 rad: onto a
+    tilt stop), Seesaw3.fmu in fmi3_host.c's (Co-Simulation, and Model Exchange from 0.05 rad with state events and
+    the tap's two edges as time events); FMI 3.0's Co-Simulation case equals FMI 2.0's."""
+    steps, angles = 1500, ["0.05", "0.01"]
+    results = {}
+    for platform_dir in ("linux64", "win64"):
+        folder = tmp_path / platform_dir
+        folder.mkdir()
+        arguments = _arguments((seesaw_fmu, controller_fmu, supervisor_fmu), folder, platform_dir, angle="theta")
+        results[platform_dir] = _run_host(HOST, platform_dir == "win64", folder, arguments + angles, wineprefix)
+    md3 = read_model_description(str(seesaw3_fmu))
+    refs3 = {v.name: v.valueReference for v in md3.modelVariables}
+    for platform_dir in ("x86_64-linux", "x86_64-windows"):
+        folder = tmp_path / platform_dir
+        folder.mkdir()
+        binary = folder / f"Seesaw3{SUFFIX3[platform_dir]}"
+        binary.write_bytes(zipfile.ZipFile(seesaw3_fmu).read(f"binaries/{platform_dir}/{binary.name}"))
+        arguments = [str(binary), md3.guid, str(steps), *(str(refs3[n]) for n in ("V", "x", "xdot", "theta", "thetadot")), "0.05", "0.05"]
+        results[platform_dir] = _run_host(HOST3, platform_dir == "x86_64-windows", folder, arguments, wineprefix)
+    for linux, windows in (("linux64", "win64"), ("x86_64-linux", "x86_64-windows")):
+        for a, b in zip(results[linux], results[windows]):
+            print(f"\n{linux}", a, f"\n{windows}", b, "\nmax |difference|", np.max(np.abs(b - a)))
+            assert np.all(np.isfinite(a)) and np.any(a[:4] != 0)
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
+    starts = {v.name: v.start for v in read_model_description(str(seesaw_fmu)).modelVariables}
+    assert abs(results["linux64"][0][0]) == float(starts["track_half_length"]), "the open loop ends on a track stop"
+    assert abs(results["linux64"][1][2]) == float(starts["theta_stop"]), "the loop (a pendulum's gains) ends on a tilt stop"
+    state_events, time_events = results["x86_64-linux"][1][4:]
+    assert state_events > 0 and time_events == 2, "Model Exchange met the switches and the tap's two edges"
+    np.testing.assert_allclose(results["x86_64-linux"][0], results["linux64"][0], rtol=0, atol=1e-12)
 
 
 PLAN_HOST = Path(__file__).parent / "hosts" / "plan_host.c"

@@ -1,13 +1,14 @@
-/* A plain C FMI 3.0 host for the FMI 3.0 plant (Plant3), built natively (dlopen) and with mingw-w64
- * (LoadLibrary, run under Wine): the FMI 3.0 companion of fmu_host.c (issue 11).
+/* A plain C FMI 3.0 host for the FMI 3.0 cart models (Plant3, Seesaw3), built natively (dlopen) and with mingw-w64
+ * (LoadLibrary, run under Wine): the FMI 3.0 companion of fmu_host.c (issues 11 and 20).
  *
- * usage: fmi3_host PLANT3_LIB INSTANTIATION_TOKEN STEPS vr(V) vr(x) vr(xdot) vr(alpha) vr(alphadot)
+ * usage: fmi3_host LIB INSTANTIATION_TOKEN STEPS vr(V) vr(x) vr(xdot) vr(angle) vr(angledot) [CS_ANGLE ME_ANGLE]
+ * (angle: the plant's alpha, the seesaw's theta; the start angles default to the plant's pi + 0.3 and pi - 0.3)
  * prints two lines of %.17g:
- *   1. Co-Simulation: the plant's states after fmu_host.c's open-loop case (12 V sine from alpha = pi + 0.3,
- *      STEPS steps of 1 ms), so it can be compared with the FMI 2.0 plant's line too;
- *   2. Model Exchange: the states after STEPS ms of explicit Euler (0.1 ms) from alpha = pi - 0.3 with
- *      friction on and the default poke (at 1 s), with an event iteration wherever an event indicator changes sign
- *      or a time event is due, then the number of state and time events. */
+ *   1. Co-Simulation: the states after fmu_host.c's open-loop case (12 V sine from the angle CS_ANGLE,
+ *      STEPS steps of 1 ms), so it can be compared with the FMI 2.0 FMU's line too;
+ *   2. Model Exchange: the states after STEPS ms of explicit Euler (0.1 ms) from the angle ME_ANGLE with
+ *      friction on and the default pulse (the poke or the tap, at 1 s), with an event iteration wherever an event
+ *      indicator changes sign or a time event is due, then the number of state and time events. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -84,18 +85,19 @@ int main(int argc, char **argv) {
     Api api;
     fmi3ValueReference vr[5];
     fmi3Instance p;
-    double v[NX], u, x[NX], dx[NX], z[NZ_MAX], z_old[NZ_MAX], t, h = 1e-4, next_time;
+    double v[NX], u, x[NX], dx[NX], z[NZ_MAX], z_old[NZ_MAX], t, h = 1e-4, next_time, cs_angle = PI + 0.3, me_angle = PI - 0.3;
     size_t nz, i;
     int k, n, state_events = 0, time_events = 0;
-    if (argc != 9) { fprintf(stderr, "usage: see fmi3_host.c\n"); return 2; }
+    if (argc != 9 && argc != 11) { fprintf(stderr, "usage: see fmi3_host.c\n"); return 2; }
+    if (argc == 11) { cs_angle = atof(argv[9]); me_angle = atof(argv[10]); }
     if (!load(argv[1], &api)) { fprintf(stderr, "cannot load %s or one of its FMI 3.0 functions\n", argv[1]); return 3; }
     n = atoi(argv[3]);
     for (k = 0; k < 5; k++) vr[k] = (fmi3ValueReference)atoi(argv[4 + k]);
 
     /* 1. Co-Simulation: the plant alone, open loop (fmu_host.c's case 1) */
-    p = api.instantiate_cs("plant", argv[2], "", fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0, NULL, logger, NULL);
+    p = api.instantiate_cs("model", argv[2], "", fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0, NULL, logger, NULL);
     if (!p) return 4;
-    u = PI + 0.3;
+    u = cs_angle;
     if (api.enter(p, fmi3False, 0, 0, fmi3False, 0) != fmi3OK || api.set(p, &vr[3], 1, &u, 1) != fmi3OK) return 5;
     if (api.leave(p) != fmi3OK) return 5;
     for (k = 0; k < n; k++) {
@@ -111,9 +113,9 @@ int main(int argc, char **argv) {
     api.free_instance(p);
 
     /* 2. Model Exchange: explicit Euler with state and time events (friction on, a poke) */
-    p = api.instantiate_me("plant", argv[2], "", fmi3False, fmi3False, NULL, logger);
+    p = api.instantiate_me("model", argv[2], "", fmi3False, fmi3False, NULL, logger);
     if (!p || api.number_of_indicators(p, &nz) != fmi3OK || nz > NZ_MAX) return 7;
-    u = PI - 0.3;
+    u = me_angle;
     if (api.enter(p, fmi3False, 0, 0, fmi3False, 0) != fmi3OK || api.set(p, &vr[3], 1, &u, 1) != fmi3OK) return 8;
     if (api.leave(p) != fmi3OK) return 8;
     next_time = event_iteration(&api, p);

@@ -4,10 +4,11 @@
  * usage: fmu_host PLANT_LIB PLANT_GUID CONTROLLER_LIB CONTROLLER_GUID SUPERVISOR_LIB SUPERVISOR_GUID STEPS
  *        vr(V) vr(x) vr(xdot) vr(alpha) vr(alphadot) vr(alpha_measured) vr(x_measured)
  *        vr(ctl.alpha_measured) vr(ctl.V_command) vr(ctl.n) vr(ctl.A[1,1]) vr(ctl.B[1]) vr(ctl.C[1]) vr(ctl.D)
- *        vr(sup.V_command) vr(sup.alpha_measured) vr(sup.x_measured) vr(sup.V)
- * prints two lines of %.17g: the plant's states after the open-loop case (12 V sine from alpha = pi + 0.3),
- * then the plant's states, the controller's and the supervisor's voltage after the closed loop of the
- * three FMUs (wired as pendulab.cosim.pendulum.CONNECTIONS, from alpha = 0.01 near upright). */
+ *        vr(sup.V_command) vr(sup.alpha_measured) vr(sup.x_measured) vr(sup.V) [OPEN_ANGLE LOOP_ANGLE]
+ * prints two lines of %.17g: the plant's states after the open-loop case (12 V sine from alpha = OPEN_ANGLE,
+ * default pi + 0.3), then the plant's states, the controller's and the supervisor's voltage after the closed loop
+ * of the three FMUs (wired as pendulab.cosim.pendulum.CONNECTIONS, from alpha = LOOP_ANGLE, default 0.01 near
+ * upright). The seesaw takes the plant's place with its tilt theta as the angle (the vr arguments say which). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -63,9 +64,10 @@ int main(int argc, char **argv) {
     Api plant, ctl, sup;
     fmi2ValueReference vr[18];
     fmi2Component p, c, s;
-    double v[4], u, y, xm, w;
+    double v[4], u, y, xm, w, open_angle = PI + 0.3, loop_angle = 0.01;
     int k, n;
-    if (argc != 26) { fprintf(stderr, "usage: see fmu_host.c\n"); return 2; }
+    if (argc != 26 && argc != 28) { fprintf(stderr, "usage: see fmu_host.c\n"); return 2; }
+    if (argc == 28) { open_angle = atof(argv[26]); loop_angle = atof(argv[27]); }
     if (!load(argv[1], &plant) || !load(argv[3], &ctl) || !load(argv[5], &sup)) {
         fprintf(stderr, "cannot load a library\n");
         return 3;
@@ -74,7 +76,7 @@ int main(int argc, char **argv) {
     for (k = 0; k < 18; k++) vr[k] = (fmi2ValueReference)atoi(argv[8 + k]);
 
     /* 1. the plant alone, open loop */
-    p = start(&plant, "plant", argv[2], vr[3], PI + 0.3);
+    p = start(&plant, "plant", argv[2], vr[3], open_angle);
     if (!p || plant.leave(p) != fmi2OK) return 4;
     for (k = 0; k < n; k++) {
         u = 12.0 * sin(2 * PI * k * 1e-3);
@@ -86,7 +88,7 @@ int main(int argc, char **argv) {
     plant.free_instance(p);
 
     /* 2. the three FMUs in a loop: x+ = 0.9 x + e, V = 20 x + 30 e, e = -Lp alpha_measured */
-    p = start(&plant, "plant", argv[2], vr[3], 0.01);
+    p = start(&plant, "plant", argv[2], vr[3], loop_angle);
     c = start(&ctl, "controller", argv[4], vr[10], 0.9);
     s = start(&sup, "supervisor", argv[6], vr[14], 0.0);
     if (!p || !c || !s) return 6;

@@ -137,6 +137,9 @@ def build_fmu(name: str, out_dir: Path | None = None, *, cross_compile: bool = T
         for path in model_dir(name).iterdir():
             if path.suffix in (".c", ".h"):
                 shutil.copy(path, sources_dir / path.name)
+        for filename in spec.sources:  # a model made of shared C (c/state_space.c) names it among its sources
+            if not (sources_dir / filename).exists() and filename not in spec.generated:
+                shutil.copy(WRAPPER_DIR / filename, sources_dir / filename)
         for filename, text in spec.generated.items():
             (sources_dir / filename).write_text(text)
         (sources_dir / "variables.h").write_text(variables_header(spec))

@@ -1,7 +1,7 @@
 """The one symbolic model of the cart-pendulum plant, in CasADi.
 
 Everything that needs the plant's equations takes them from here: the plant FMU's C code (generated
-by :meth:`PlantModel.generate_c`), the linearization (:mod:`pendulab.model.linear`), the Python
+from :attr:`PlantModel.functions`), the linearization (:mod:`pendulab.model.linear`), the Python
 reference integration used by the tests, and the least-squares calibration fit.
 
 States ``[x, xdot, alpha, alphadot]``, input ``V`` (volts), parameters in the order of
@@ -23,8 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import casadi as ca
 import numpy as np
@@ -66,18 +65,68 @@ def mean_poke_acceleration(p: dict[str, ca.SX], t: ca.SX, h: ca.SX) -> ca.SX:
 
 #: Discrete state of the Model Exchange plant (each changes only at events), in order.
 REGIME = ("friction", "current", "stop", "count_alpha", "count_x")
-#: Friction regimes (``REGIME[0]``). The two sliding regimes hold the speed on the surface ``|xdot| = v1``
-#: (between stick and slip) or ``|xdot| = v2`` (between slip and free) where both sides push the cart onto
-#: it: the Filippov solution that Co-Simulation's fixed step approximates by chattering.
+#: Friction regimes (``REGIME[0]``). The two sliding regimes hold the speed on a surface between stick and slip
+#: (``|xdot| = v1``, or ``|F_motor| = F1``: through the back-EMF a speed too) or between slip and free
+#: (``|xdot| = v2`` or ``|F_motor| = F2``) where both sides push the cart onto it: the Filippov solution that
+#: Co-Simulation's fixed step approximates by chattering.
 FREE, SLIP, STICK, SLIDE_V1, SLIDE_V2 = 0.0, 1.0, 2.0, 3.0, 4.0
 #: How close ``|xdot|`` must be to v1 or v2 for an event to count as on that surface (m/s).
 SURFACE_TOLERANCE = 1e-9
-#: The event indicators (zero crossings) of the Model Exchange plant, in order.
-EVENT_INDICATORS = (
+#: How close ``|F_motor|`` must be to F1 or F2 for an event to count as on that surface (N; the motor's force
+#: changes by about 8 N per m/s of the IP02's speed).
+FORCE_TOLERANCE = 1e-8
+#: The event indicators of the cart's drive (friction law, current limit, voltage saturation), in order: every
+#: cart model (the plant, the seesaw) has them, then two per end stop (:class:`EndStop`).
+DRIVE_INDICATORS = (
     "stick_speed", "stick_force", "slip_speed", "slip_force",
     "current_upper", "current_lower", "voltage_upper", "voltage_lower",
-    "stop_upper", "stop_lower",
 )
+
+
+@dataclass(frozen=True)
+class EndStop:
+    """An end stop of one coordinate of a cart model, as Model Exchange's discrete state sees it.
+
+    Attributes
+    ----------
+    name : str
+        Its event indicators are ``<name>_upper`` and ``<name>_lower``.
+    position : int
+        Index of the coordinate in the state; its speed is the next state.
+    limit : str
+        The parameter that places the stops at ``+/- p[limit]``.
+    slot : int
+        Its entry in the regime vector: +1 held at the upper stop, -1 at the lower, 0 free.
+    acceleration : str
+        The signal of the equations that is the coordinate's acceleration were the stop not holding it.
+    """
+
+    name: str
+    position: int
+    limit: str
+    slot: int
+    acceleration: str
+
+    @property
+    def indicators(self) -> tuple[str, str]:
+        return f"{self.name}_upper", f"{self.name}_lower"
+
+    def holds(self, state: ca.SX, p: dict[str, ca.SX], acceleration: ca.SX, regime: ca.SX | None) -> ca.SX:
+        """Whether the stop holds its coordinate: at the stop and pushed into it by ``acceleration`` (decided from
+        the state: Co-Simulation's law), or as the ``regime`` froze it (Model Exchange)."""
+        if regime is not None:
+            return ca.fabs(regime[self.slot]) > 0.5
+        q, speed, limit = state[self.position], state[self.position + 1], p[self.limit]
+        return ca.logic_or(
+            ca.logic_and(ca.logic_and(q >= limit, speed >= 0), acceleration > 0),
+            ca.logic_and(ca.logic_and(q <= -limit, speed <= 0), acceleration < 0),
+        )
+
+
+#: The cart at the ends of its track.
+TRACK_STOP = EndStop("stop", 0, "track_half_length", 2, "xddot_free")
+#: The event indicators (zero crossings) of the Model Exchange plant, in order.
+EVENT_INDICATORS = (*DRIVE_INDICATORS, *TRACK_STOP.indicators)
 # The encoder steps are not event indicators: they switch no term of the right-hand side, and a CVode
 # restart at every count (thousands per swing) cost more accuracy than it gave (1e-4 rad/s at rtol 1e-8).
 
@@ -110,6 +159,11 @@ def _friction_regime(xdot: ca.SX, F_motor: ca.SX, p: dict[str, ca.SX]) -> ca.SX:
     sticks = ca.logic_and(ca.fabs(xdot) < p["v1"], ca.fabs(F_motor) < p["F1"])
     slips = ca.logic_and(ca.fabs(xdot) < p["v2"], ca.fabs(F_motor) < p["F2"])
     return ca.if_else(sticks, STICK, ca.if_else(slips, SLIP, FREE))
+
+
+def friction_force(friction: ca.SX, F_motor: ca.SX, xdot: ca.SX, p: dict[str, ca.SX]) -> ca.SX:
+    """The stick-slip law's force in a given regime (stick, slip or free; a sliding regime is the model's F_hold)."""
+    return ca.if_else(friction > 1.5, -F_motor, ca.if_else(friction > 0.5, -p["B"] * xdot, 0.0))
 
 
 def plant_equations(
@@ -151,7 +205,7 @@ def plant_equations(
         cart's acceleration if no end stop held it) and, with the stick-slip switches, ``F_hold`` (the
         friction force that would keep the speed constant).
     """
-    x, xdot, alpha, alphadot = state[0], state[1], state[2], state[3]
+    xdot, alpha, alphadot = state[1], state[2], state[3]
 
     V_applied, raw, current, F_motor = _amplifier(V, xdot, p, None if regime is None else regime[1])
 
@@ -171,7 +225,7 @@ def plant_equations(
         F_hold = None
     else:
         friction = _friction_regime(xdot, F_motor, p) if regime is None else regime[0]
-        F_friction = ca.if_else(friction > 1.5, -F_motor, ca.if_else(friction > 0.5, -p["B"] * xdot, 0.0))
+        F_friction = friction_force(friction, F_motor, xdot, p)
         # The friction force that makes xddot = 0: a sliding regime holds the speed on its surface.
         base = F_motor - p["Beq"] * xdot - Mp * lp * ca.sin(alpha) * alphadot**2
         J_safe = ca.if_else(has_pendulum, J, 1.0)
@@ -200,14 +254,7 @@ def plant_equations(
     # End stops: a cart at a stop and pushed into it is held there (the track takes the force); the
     # pendulum then swings about a fixed pivot. Co-Simulation's RK4 also projects the position back
     # onto the stop and kills the outward speed after each sub-step (plant_rk4).
-    L = p["track_half_length"]
-    if regime is None:
-        blocked = ca.logic_or(
-            ca.logic_and(ca.logic_and(x >= L, xdot >= 0), xddot > 0),
-            ca.logic_and(ca.logic_and(x <= -L, xdot <= 0), xddot < 0),
-        )
-    else:
-        blocked = ca.fabs(regime[2]) > 0.5
+    blocked = TRACK_STOP.holds(state, p, xddot, regime)
     alphaddot_held = ca.if_else(has_pendulum, gravity_torque / ca.if_else(has_pendulum, J, 1.0) + poke, 0.0)
     derivative = ca.vertcat(
         ca.if_else(blocked, 0.0, xdot),
@@ -229,37 +276,58 @@ def _encoder_count(value: ca.SX, step: ca.SX) -> ca.SX:
     return ca.if_else(step > 0, ca.sign(value) * ca.floor(ca.fabs(value) / safe_step + 0.5), 0.0)
 
 
-def regime_at(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """Event update of the Model Exchange plant: the discrete state the law picks at this point.
+def switches_at(
+    state: ca.SX, V: ca.SX, p: dict[str, ca.SX], regime: ca.SX,
+    signals: Callable[[ca.SX, ca.SX], dict[str, ca.SX]], stops: Sequence[EndStop],
+) -> tuple[ca.SX, ca.SX, list[ca.SX], ca.SX]:
+    """Event update of a cart model in Model Exchange: the switches the law picks at this point.
 
-    The law is the one Co-Simulation evaluates at every step (:func:`plant_equations` with
-    ``regime=None``); an end stop reached from inside resets the cart onto the stop, at rest.
+    The law is the one Co-Simulation evaluates at every step (the equations without a regime); a coordinate
+    that reaches an end stop from inside stops dead on it. The cart's drive (friction law, current limit) is the
+    same for every cart model; its mechanics come in through ``signals``.
+
+    Parameters
+    ----------
+    state : SX
+        The state; the cart's position and speed are its first two entries.
+    regime : SX
+        The discrete state: friction regime, current-limit branch, then each stop's slot, then the model's own.
+    signals : callable
+        ``signals(state, regime)``: the model's signals (``F_motor``, ``current_raw``, ``F_hold``, each stop's
+        acceleration) with its switches frozen in ``regime``.
+    stops : sequence of EndStop
 
     Returns
     -------
-    regime : SX (5,)
-        The new :data:`REGIME`.
-    state : SX (4,)
-        The state after the event (changed only when the cart hits a stop).
+    friction, current_mode : SX
+        The new regime's first two entries.
+    stop_slots : list of SX
+        Each stop's new slot (+1, -1, 0).
+    state : SX
+        The state after the event (changed only where a coordinate hits a stop).
     """
-    x, xdot = state[0], state[1]
-    L = p["track_half_length"]
-    held = regime[2]
-    # A cart arriving at a stop stops dead there.
-    hit_upper = ca.logic_and(held == 0, ca.logic_and(x >= L, xdot >= 0))
-    hit_lower = ca.logic_and(held == 0, ca.logic_and(x <= -L, xdot <= 0))
-    x_new = ca.if_else(hit_upper, L, ca.if_else(hit_lower, -L, x))
-    xdot_new = ca.if_else(ca.logic_or(ca.logic_or(hit_upper, hit_lower), held != 0), 0.0, xdot)
-    new_state = ca.vertcat(x_new, xdot_new, state[2], state[3])
+    new = [state[k] for k in range(state.numel())]
+    for stop in stops:
+        q, speed, limit, held = state[stop.position], state[stop.position + 1], p[stop.limit], regime[stop.slot]
+        hit_upper = ca.logic_and(held == 0, ca.logic_and(q >= limit, speed >= 0))
+        hit_lower = ca.logic_and(held == 0, ca.logic_and(q <= -limit, speed <= 0))
+        new[stop.position] = ca.if_else(hit_upper, limit, ca.if_else(hit_lower, -limit, q))
+        new[stop.position + 1] = ca.if_else(ca.logic_or(ca.logic_or(hit_upper, hit_lower), held != 0), 0.0, speed)
+    new_state = ca.vertcat(*new)
+    xdot_new = new[1]
     _, raw, _, _ = _amplifier(V, xdot_new, p, None)
     current_mode = _current_mode(raw, p)
     _, _, _, F_motor = _amplifier(V, xdot_new, p, current_mode)
     friction = _friction_regime(xdot_new, F_motor, p)
 
-    def push(regime_value: float) -> ca.SX:
+    def frozen(friction_value: ca.SX | float) -> ca.SX:
+        # The regime with the given friction and this current branch; the stops as they were (a stop's slot
+        # does not change its coordinate's free acceleration; the event iteration settles the rest).
+        return ca.vertcat(friction_value, current_mode, regime[2:])
+
+    def push(friction_value: float) -> ca.SX:
         # The cart's acceleration along its velocity under a given friction regime (> 0: speeding up).
-        r = ca.vertcat(regime_value, current_mode, 0.0, 0.0, 0.0)
-        return ca.sign(xdot_new) * plant_equations(new_state, V, p, t, regime=r)[1]["xddot_free"]
+        return ca.sign(xdot_new) * signals(new_state, frozen(friction_value))["xddot_free"]
 
     # On a speed surface the law's choice may be pushed straight back across it: pick the side whose
     # dynamics leave the surface into its own region, or slide on the surface if both push onto it.
@@ -269,34 +337,45 @@ def regime_at(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.
     on_v2 = ca.logic_and(ca.fabs(speed - p["v2"]) < SURFACE_TOLERANCE, ca.fabs(F_motor) < p["F2"])
     at_v1 = ca.if_else(push(STICK) < 0, STICK, ca.if_else(push(SLIP) > 0, SLIP, SLIDE_V1))
     at_v2 = ca.if_else(push(SLIP) < 0, SLIP, ca.if_else(push(FREE) > 0, FREE, SLIDE_V2))
-    friction = ca.if_else(on_v1, at_v1, ca.if_else(on_v2, at_v2, friction))
-    free = ca.vertcat(friction, current_mode, 0.0, 0.0, 0.0)
-    xddot = plant_equations(new_state, V, p, t, regime=free)[1]["xddot_free"]
-    # At a stop the cart stays while the net force pushes it into the stop.
-    at_upper = ca.logic_and(x_new >= L, xddot > 0)
-    at_lower = ca.logic_and(x_new <= -L, xddot < 0)
-    stop = ca.if_else(at_upper, 1.0, ca.if_else(at_lower, -1.0, 0.0))
-    new_regime = ca.vertcat(
-        friction, current_mode, stop, _encoder_count(state[2], p["q_alpha"]), _encoder_count(x_new, p["q_x"])
-    )
-    return new_regime, new_state
+    # The force surfaces: with the current unlimited, |F_motor| falls as the cart speeds up along it (back-EMF),
+    # so the stick (slip) side is left into its own region by an acceleration along F_motor.
+    unlimited = current_mode == 0
+
+    def along_force(friction_value: float) -> ca.SX:
+        return ca.sign(F_motor) * signals(new_state, frozen(friction_value))["xddot_free"]
+
+    force = ca.fabs(F_motor)
+    on_F1 = ca.logic_and(ca.logic_and(ca.fabs(force - p["F1"]) < FORCE_TOLERANCE, speed < p["v1"]),
+                         ca.logic_and(ca.logic_and(force < p["F2"], p["F1"] > 0), unlimited))
+    on_F2 = ca.logic_and(ca.logic_and(ca.fabs(force - p["F2"]) < FORCE_TOLERANCE, speed < p["v2"]),
+                         ca.logic_and(ca.logic_and(p["F1"] < p["F2"], p["F2"] > 0), unlimited))
+    at_F1 = ca.if_else(along_force(STICK) > 0, STICK, ca.if_else(along_force(SLIP) < 0, SLIP, SLIDE_V1))
+    at_F2 = ca.if_else(along_force(SLIP) > 0, SLIP, ca.if_else(along_force(FREE) < 0, FREE, SLIDE_V2))
+    friction = ca.if_else(on_v1, at_v1, ca.if_else(on_v2, at_v2, ca.if_else(on_F1, at_F1, ca.if_else(on_F2, at_F2, friction))))
+    settled = signals(new_state, frozen(friction))
+    slots = []
+    for stop in stops:
+        # At a stop the coordinate stays while the net force pushes it into the stop.
+        q, limit, acceleration = new[stop.position], p[stop.limit], settled[stop.acceleration]
+        at_upper = ca.logic_and(q >= limit, acceleration > 0)
+        at_lower = ca.logic_and(q <= -limit, acceleration < 0)
+        slots.append(ca.if_else(at_upper, 1.0, ca.if_else(at_lower, -1.0, 0.0)))
+    return friction, current_mode, slots, new_state
 
 
-def event_indicators(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> ca.SX:
-    """The zero-crossing functions of :data:`EVENT_INDICATORS`: each changes sign where a switch of the
-    right-hand side changes. A switch that is turned off by its parameter gives
-    a constant."""
-    x, xdot = state[0], state[1]
-    _, signals = plant_equations(state, V, p, t, regime=regime)
+def switch_indicators(state: ca.SX, p: dict[str, ca.SX], V: ca.SX, regime: ca.SX, signals: dict[str, ca.SX],
+                      stops: Sequence[EndStop]) -> ca.SX:
+    """The zero-crossing functions of a cart model: :data:`DRIVE_INDICATORS`, then each stop's two. Each changes
+    sign where a switch of the right-hand side changes; a switch that is turned off by its parameter gives a
+    constant. ``signals`` are the model's with its switches frozen in ``regime`` (see :func:`switches_at`)."""
+    xdot = state[1]
     F_motor, raw = signals["F_motor"], signals["current_raw"]
     stick_on, slip_on, limit_on = p["F1"] > 0, p["F2"] > 0, p["I_max"] > 0
-    L, stop = p["track_half_length"], regime[2]
-
     friction, F_hold = regime[0], signals["F_hold"]
     # While sliding, the holding force must stay between the two sides' forces.
     slide_v1 = (F_hold + F_motor) * (-p["B"] * xdot - F_hold)
     slide_v2 = (F_hold + p["B"] * xdot) * (0.0 - F_hold)
-    return ca.vertcat(
+    z = [
         ca.if_else(friction == SLIDE_V1, slide_v1, ca.if_else(stick_on, p["v1"] - ca.fabs(xdot), 1.0)),
         ca.if_else(stick_on, p["F1"] - ca.fabs(F_motor), -1.0),
         ca.if_else(friction == SLIDE_V2, slide_v2, ca.if_else(slip_on, p["v2"] - ca.fabs(xdot), 1.0)),
@@ -305,10 +384,35 @@ def event_indicators(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regi
         ca.if_else(limit_on, p["I_max"] + raw, 1.0),
         p["V_max"] - V,
         p["V_max"] + V,
-        # Free: distance to each stop. Held: how hard the cart is pressed into its stop.
-        ca.if_else(stop == 0, L - x, stop * signals["xddot_free"]),
-        ca.if_else(stop == 0, x + L, 1.0),
+    ]
+    for stop in stops:
+        q, limit, held = state[stop.position], p[stop.limit], regime[stop.slot]
+        # Free: distance to each stop. Held: how hard the coordinate is pressed into its stop.
+        z += [ca.if_else(held == 0, limit - q, held * signals[stop.acceleration]), ca.if_else(held == 0, q + limit, 1.0)]
+    return ca.vertcat(*z)
+
+
+def regime_at(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Event update of the Model Exchange plant (:func:`switches_at` with the plant's mechanics and its track).
+
+    Returns
+    -------
+    regime : SX (5,)
+        The new :data:`REGIME`.
+    state : SX (4,)
+        The state after the event (changed only when the cart hits a stop).
+    """
+    friction, current_mode, (stop,), new_state = switches_at(
+        state, V, p, regime, lambda s, r: plant_equations(s, V, p, t, regime=r)[1], (TRACK_STOP,))
+    new_regime = ca.vertcat(
+        friction, current_mode, stop, _encoder_count(state[2], p["q_alpha"]), _encoder_count(new_state[0], p["q_x"])
     )
+    return new_regime, new_state
+
+
+def event_indicators(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> ca.SX:
+    """The zero-crossing functions of :data:`EVENT_INDICATORS` (:func:`switch_indicators` of the plant)."""
+    return switch_indicators(state, p, V, regime, plant_equations(state, V, p, t, regime=regime)[1], (TRACK_STOP,))
 
 
 @dataclass(frozen=True)
@@ -367,18 +471,12 @@ class PlantModel:
         """``plant_event(state[4], V, p[np], t, regime[5]) -> (regime[5], state[4])`` (:func:`regime_at`)."""
         return _regime_functions()[2]
 
-    def generate_c(self, directory: Path, name: str = "plant_casadi") -> Path:
-        """Write the C code of ``plant_ode``, ``plant_outputs``, ``plant_rk4`` and the Model Exchange
-        functions ``plant_ode_regime``, ``plant_indicators``, ``plant_event`` to ``directory``.
-
-        Returns the path of the ``.c`` file; a header of the same stem is written beside it.
-        """
-        directory.mkdir(parents=True, exist_ok=True)
-        gen = ca.CodeGenerator(f"{name}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
-        for function in (self.ode, self.outputs, self.rk4, self.ode_regime, self.indicators, self.event_update):
-            gen.add(function)
-        gen.generate(str(directory) + "/")
-        return directory / f"{name}.c"
+    @property
+    def functions(self) -> tuple[ca.Function, ...]:
+        """Every function the plant FMU's C code is generated from (:mod:`pendulab.fmu.state_space`), in the
+        order ``plant_ode``, ``plant_outputs``, ``plant_rk4``, ``plant_ode_regime``, ``plant_indicators``,
+        ``plant_event``."""
+        return (self.ode, self.outputs, self.rk4, self.ode_regime, self.indicators, self.event_update)
 
     def simulate(
         self,

@@ -36,7 +36,6 @@ import dataclasses
 import math
 from dataclasses import dataclass, fields
 from functools import lru_cache
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import casadi as ca
@@ -45,7 +44,21 @@ import numpy as np
 
 from pendulab.errors import ParameterError
 from pendulab.model.parameters import PlantParameters, _p, check_ranges
-from pendulab.model.plant import MAX_SUBSTEP, _amplifier, _friction_regime, mean_poke_acceleration, poke_acceleration, quantize, substeps
+from pendulab.model.plant import (
+    DRIVE_INDICATORS,
+    MAX_SUBSTEP,
+    TRACK_STOP,
+    EndStop,
+    _amplifier,
+    _friction_regime,
+    friction_force,
+    mean_poke_acceleration,
+    poke_acceleration,
+    quantize,
+    substeps,
+    switch_indicators,
+    switches_at,
+)
 
 STATES = ("x", "xdot", "theta", "thetadot")
 #: Outputs of :attr:`SeesawModel.outputs`, in order.
@@ -53,6 +66,13 @@ OUTPUTS = ("theta_measured", "x_measured", "V_applied", "F_friction")
 #: Seesaw tilt per encoder count: a 1024-line encoder read in quadrature (x4) behind a 3:1 gear
 #: (``config_ssw.m``: ``KE_SW = 2*pi/(4*1024)``, ``Kgs = 3``).
 SEESAW_COUNT = 2 * math.pi / 4096 / 3
+#: The seesaw resting on the floor at its tilt stops.
+TILT_STOP = EndStop("tilt_stop", 2, "theta_stop", 3, "thetaddot_free")
+#: Discrete state of the Model Exchange seesaw (each changes only at events), in order: the plant's drive
+#: (:data:`pendulab.model.plant.REGIME`'s friction and current branch), the track's stops, the tilt's stops.
+REGIME = ("friction", "current", "stop", "tilt_stop")
+#: The event indicators (zero crossings) of the Model Exchange seesaw, in order.
+EVENT_INDICATORS = (*DRIVE_INDICATORS, *TRACK_STOP.indicators, *TILT_STOP.indicators)
 
 
 def _cart_field(name: str) -> Any:
@@ -146,7 +166,9 @@ def _tap(p: dict[str, ca.SX]) -> dict[str, ca.SX]:
     return {"poke_magnitude": p["tap_magnitude"], "poke_duration": p["tap_duration"], "poke_start": p["tap_start"]}
 
 
-def seesaw_equations(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, *, tap: ca.SX | None = None) -> tuple[ca.SX, dict[str, ca.SX]]:
+def seesaw_equations(
+    state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, *, tap: ca.SX | None = None, regime: ca.SX | None = None
+) -> tuple[ca.SX, dict[str, ca.SX]]:
     """The right-hand side of the seesaw and its intermediate signals (see the module's docstring).
 
     Parameters
@@ -161,29 +183,43 @@ def seesaw_equations(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, *, t
         Time, for the tap.
     tap : SX, optional
         The tap's angular acceleration; default the pulse at ``t``.
+    regime : SX (4,), optional
+        The discrete state of :data:`REGIME`: friction regime, current-limit branch, the track's and the tilt's
+        stops held fixed (Model Exchange between events). None: the switches are decided at every evaluation from
+        the state (Co-Simulation's fixed-step law).
 
     Returns
     -------
     derivative : SX (4,)
     signals : dict
-        ``V_applied``, ``F_motor``, ``F_friction``.
+        ``V_applied``, ``F_motor``, ``F_friction``, ``current_raw``, ``xddot_free`` and ``thetaddot_free`` (each
+        coordinate's acceleration were its stop not holding it) and, with a regime, ``F_hold`` (the friction
+        force that keeps the cart's speed constant).
     """
     x, xdot, theta, thetadot = state[0], state[1], state[2], state[3]
-    V_applied, _, _, F_motor = _amplifier(V, xdot, p, None)
-    friction = _friction_regime(xdot, F_motor, p)
-    F_friction = ca.if_else(friction > 1.5, -F_motor, ca.if_else(friction > 0.5, -p["B"] * xdot, 0.0))
-    F_net = F_motor + F_friction - p["Beq"] * xdot
+    V_applied, raw, _, F_motor = _amplifier(V, xdot, p, None if regime is None else regime[1])
+    friction = _friction_regime(xdot, F_motor, p) if regime is None else regime[0]
+    F_friction = friction_force(friction, F_motor, xdot, p)
 
     mc, Dt, g = p["M_cart"], p["D_T"], p["g"]
     m_x = mc + p["rotor_inertia"] * p["eta_g"] * p["Kg"] ** 2 * p["Jm"] / p["r_mp"] ** 2
     m_theta = p["J_sw"] + mc * (x**2 + Dt**2)
-    rhs_x = F_net + mc * x * thetadot**2 - mc * g * ca.sin(theta)
     rhs_theta = (
         -2 * mc * x * xdot * thetadot
         - mc * g * (x * ca.cos(theta) - Dt * ca.sin(theta))
         + p["M_sw"] * g * p["D_C"] * ca.sin(theta)
         - p["B_sw"] * thetadot
     )
+    signals = {"V_applied": V_applied, "F_motor": F_motor, "current_raw": raw}
+    if regime is not None:
+        # The friction force that makes xddot = 0 (the tilt free or resting on its stop): a sliding regime holds
+        # the cart's speed on its surface with it.
+        tilt_held = TILT_STOP.holds(state, p, 0.0, regime)
+        base = F_motor - p["Beq"] * xdot + mc * x * thetadot**2 - mc * g * ca.sin(theta)
+        signals["F_hold"] = -(base + ca.if_else(tilt_held, 0.0, mc * Dt * rhs_theta / m_theta))
+        F_friction = ca.if_else(friction > 2.5, signals["F_hold"], F_friction)
+    F_net = F_motor + F_friction - p["Beq"] * xdot
+    rhs_x = F_net + mc * x * thetadot**2 - mc * g * ca.sin(theta)
     det = m_x * m_theta - (mc * Dt) ** 2
     if tap is None:
         tap = poke_acceleration(_tap(p), t)
@@ -192,24 +228,33 @@ def seesaw_equations(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, *, t
 
     # End stops. The cart at a track end stops dead there as on the pendulum's track; the seesaw at a
     # tilt stop rests on the floor, and the cart then runs on a fixed incline.
-    L, stop = p["track_half_length"], p["theta_stop"]
-    tilt_held = ca.logic_or(
-        ca.logic_and(ca.logic_and(theta >= stop, thetadot >= 0), thetaddot > 0),
-        ca.logic_and(ca.logic_and(theta <= -stop, thetadot <= 0), thetaddot < 0),
-    )
+    thetaddot_free = thetaddot
+    tilt_held = TILT_STOP.holds(state, p, thetaddot, regime)
     xddot = ca.if_else(tilt_held, rhs_x / m_x, xddot)
     thetaddot = ca.if_else(tilt_held, 0.0, thetaddot)
-    cart_held = ca.logic_or(
-        ca.logic_and(ca.logic_and(x >= L, xdot >= 0), xddot > 0),
-        ca.logic_and(ca.logic_and(x <= -L, xdot <= 0), xddot < 0),
-    )
+    cart_held = TRACK_STOP.holds(state, p, xddot, regime)
     derivative = ca.vertcat(
         ca.if_else(cart_held, 0.0, xdot),
         ca.if_else(cart_held, 0.0, xddot),
         ca.if_else(tilt_held, 0.0, thetadot),
         thetaddot,
     )
-    return derivative, {"V_applied": V_applied, "F_motor": F_motor, "F_friction": F_friction}
+    return derivative, {**signals, "F_friction": F_friction, "xddot_free": xddot, "thetaddot_free": thetaddot_free}
+
+
+def regime_at(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Event update of the Model Exchange seesaw: the plant's :func:`~pendulab.model.plant.switches_at` with the
+    seesaw's mechanics, the track's stops and the tilt's. Returns the new :data:`REGIME` and the state after the
+    event (changed only where the cart or the seesaw hits a stop)."""
+    friction, current_mode, stops, new_state = switches_at(
+        state, V, p, regime, lambda s, r: seesaw_equations(s, V, p, t, regime=r)[1], (TRACK_STOP, TILT_STOP))
+    return ca.vertcat(friction, current_mode, *stops), new_state
+
+
+def event_indicators(state: ca.SX, V: ca.SX, p: dict[str, ca.SX], t: ca.SX, regime: ca.SX) -> ca.SX:
+    """The zero-crossing functions of :data:`EVENT_INDICATORS`."""
+    signals = seesaw_equations(state, V, p, t, regime=regime)[1]
+    return switch_indicators(state, p, V, regime, signals, (TRACK_STOP, TILT_STOP))
 
 
 def _clamp_to_stop(position: ca.SX, speed: ca.SX, limit: ca.SX) -> tuple[ca.SX, ca.SX]:
@@ -231,6 +276,9 @@ class SeesawModel:
         ``seesaw_outputs(state[4], V, p[np], t) -> [theta_measured, x_measured, V_applied, F_friction]``
     rk4 : casadi.Function
         ``seesaw_rk4(state[4], V, p[np], t, h) -> state after one RK4 step of length h``
+    functions : tuple of casadi.Function
+        Those three and Model Exchange's ``seesaw_ode_regime``, ``seesaw_indicators``, ``seesaw_event`` (the
+        plant's :attr:`~pendulab.model.plant.PlantModel.functions`, for the seesaw: the FMU's generated C).
     """
 
     @property
@@ -245,17 +293,9 @@ class SeesawModel:
     def rk4(self) -> ca.Function:
         return _functions()[2]
 
-    def generate_c(self, directory: Path, name: str = "seesaw_casadi") -> Path:
-        """Write the C code of ``seesaw_ode``, ``seesaw_outputs`` and ``seesaw_rk4`` to ``directory``.
-
-        Returns the path of the ``.c`` file; a header of the same stem is written beside it.
-        """
-        directory.mkdir(parents=True, exist_ok=True)
-        gen = ca.CodeGenerator(f"{name}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
-        for function in (self.ode, self.outputs, self.rk4):
-            gen.add(function)
-        gen.generate(str(directory) + "/")
-        return directory / f"{name}.c"
+    @property
+    def functions(self) -> tuple[ca.Function, ...]:
+        return (*_functions(), *_regime_functions())
 
     def simulate(
         self,
@@ -302,6 +342,18 @@ def _functions() -> tuple[ca.Function, ca.Function, ca.Function]:
     theta, thetadot = _clamp_to_stop(stepped[2], stepped[3], p["theta_stop"])
     rk4 = ca.Function("seesaw_rk4", [state, V, pvec, t, h], [ca.vertcat(x, xdot, theta, thetadot)], [*names, "h"], ["next"])
     return ode, outputs, rk4
+
+
+@lru_cache(maxsize=None)
+def _regime_functions() -> tuple[ca.Function, ca.Function, ca.Function]:
+    state, V, t = ca.SX.sym("state", 4), ca.SX.sym("V"), ca.SX.sym("t")
+    pvec, regime = ca.SX.sym("p", len(SeesawParameters.names())), ca.SX.sym("regime", len(REGIME))
+    p = {name: pvec[i] for i, name in enumerate(SeesawParameters.names())}
+    args, names = [state, V, pvec, t, regime], ["state", "V", "p", "t", "regime"]
+    ode = ca.Function("seesaw_ode_regime", args, [seesaw_equations(state, V, p, t, regime=regime)[0]], names, ["derivative"])
+    indicators = ca.Function("seesaw_indicators", args, [event_indicators(state, V, p, t, regime)], names, ["z"])
+    update = ca.Function("seesaw_event", args, [*regime_at(state, V, p, t, regime)], names, ["regime_next", "state_next"])
+    return ode, indicators, update
 
 
 # ---------------------------------------------------------------------------------------------- linear

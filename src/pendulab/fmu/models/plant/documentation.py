@@ -53,7 +53,8 @@ state ({", ".join(f"<code>{r}</code>" for r in REGIME)}) that changes only at ev
 <li><b>free</b> otherwise: F_friction = 0 (only the viscous Beq xdot acts).</li>
 </ul>
 <p>F1 = F2 = 0 switches stick-slip off. In Model Exchange the cart may also slide on the surfaces |xdot| = v1 or
-v2 where both sides push it there (the Filippov solution that a fixed step approximates by chattering).</p>
+v2, or |F_motor| = F1 or F2 (through the back-EMF a speed too), where both sides push it there (the Filippov
+solution that a fixed step approximates by chattering).</p>
 
 <h2>End stops</h2>
 <p>The cart stops dead at &plusmn;{_value("track_half_length")}: at a stop and pushed into it, it is held
