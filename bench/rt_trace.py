@@ -189,18 +189,14 @@ def _env(src: Path, fmus: Path | None) -> dict[str, str]:
 
 def one_run(kind: str, env: dict[str, str], folder: Path) -> tuple[str, dict, dict]:
     emu_trace, host_trace = folder / "emulator.npz", folder / "host.npz"
-    emu_args = ["--pendulum", "none"] if kind == "calibrate" else ["--raise-after", "0.3"]
+    from watchdog_trips import EMULATOR_ARGS, host_command  # (bench/: the same runs as the trip count's)
+
     me = str(Path(__file__).resolve())
-    emu = subprocess.Popen([PYTHON, me, "--role", "emulator", "--trace", str(emu_trace), "--", "rig-emulator", *emu_args],
+    emu = subprocess.Popen([PYTHON, me, "--role", "emulator", "--trace", str(emu_trace), "--", "rig-emulator", *EMULATOR_ARGS[kind]],
                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
     port = emu.stdout.readline().strip()  # type: ignore[union-attr]
     try:
-        if kind == "calibrate":
-            cmd = ["calibrate", "--port", port, "--delay", "3", "--iterations", "1", "--pendulum", "none", "--out", str(folder / "c.json")]
-            stdin = None
-        else:
-            cmd = ["lab", "--port", port, "--demo", "--delay", "3", "--stop-time", "12", "--out", str(folder / "lab")]
-            stdin = "s\n"
+        cmd, stdin = host_command(kind, port, folder)
         result = subprocess.run([PYTHON, me, "--role", "host", "--trace", str(host_trace), "--", *cmd], input=stdin,
                                 capture_output=True, text=True, env=env, timeout=120)
     finally:

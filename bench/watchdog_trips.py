@@ -41,20 +41,25 @@ def _env(src: Path, fmus: Path | None) -> dict[str, str]:
     return env
 
 
+#: The rig emulator's options for each kind of run (bench/rt_trace.py runs the same).
+EMULATOR_ARGS = {"calibrate": ["--pendulum", "none"], "lab": ["--raise-after", "0.3"]}
+
+
+def host_command(kind: str, port: str, folder: Path) -> tuple[list[str], str | None]:
+    """The host's ``pendulab`` arguments and its stdin for one calibrate or lab run against ``port``."""
+    if kind == "calibrate":
+        return ["calibrate", "--port", port, "--delay", "3", "--iterations", "1", "--pendulum", "none", "--out", str(folder / "c.json")], None
+    return ["lab", "--port", port, "--demo", "--delay", "3", "--stop-time", "12", "--out", str(folder / "lab")], "s\n"
+
+
 def one_run(kind: str, env: dict[str, str], folder: Path) -> tuple[bool, str, float]:
     """(tripped, ending line, seconds) of one calibrate or lab run."""
-    emu_args = ["--pendulum", "none"] if kind == "calibrate" else ["--raise-after", "0.3"]
-    emu = subprocess.Popen([PYTHON, "-m", "pendulab", "rig-emulator", *emu_args], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                           text=True, env=env)
+    emu = subprocess.Popen([PYTHON, "-m", "pendulab", "rig-emulator", *EMULATOR_ARGS[kind]], stdout=subprocess.PIPE,
+                           stderr=subprocess.DEVNULL, text=True, env=env)
     port = emu.stdout.readline().strip()  # type: ignore[union-attr]
     started = time.monotonic()
     try:
-        if kind == "calibrate":
-            cmd = ["calibrate", "--port", port, "--delay", "3", "--iterations", "1", "--pendulum", "none", "--out", str(folder / "c.json")]
-            stdin = None
-        else:
-            cmd = ["lab", "--port", port, "--demo", "--delay", "3", "--stop-time", "12", "--out", str(folder / "lab")]
-            stdin = "s\n"
+        cmd, stdin = host_command(kind, port, folder)
         result = subprocess.run([PYTHON, "-m", "pendulab", *cmd], input=stdin, capture_output=True, text=True, env=env, timeout=120)
     finally:
         emu.terminate()
