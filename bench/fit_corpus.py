@@ -16,7 +16,10 @@ threads) and wall time. ``ok`` is the issue's bar, judged on cases whose true va
 
 Usage::
 
-    nice python bench/fit_corpus.py [--jobs 2] [--only SUBSTRING] [--held-out]
+    nice python bench/fit_corpus.py [--jobs 2] [--only 'SUBSTRING;SUBSTRING'] [--held-out]
+
+To compare two versions of the fit on the same cases in the same run, start this script from each
+version's environment at once (e.g. the main checkout's ``.venv/bin/python bench/fit_corpus.py``).
 """
 
 from __future__ import annotations
@@ -115,7 +118,7 @@ def table(rows: list[dict], title: str) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=2, help="fits in parallel (default 2)")
-    parser.add_argument("--only", default="", help="only the cases whose name contains this")
+    parser.add_argument("--only", default="", help="only the cases whose name contains one of these (separated by ';')")
     parser.add_argument("--held-out", action="store_true", help="the held-out third only (look at it at the end)")
     args = parser.parse_args()
 
@@ -123,9 +126,12 @@ def main() -> int:
 
     cases = corpus()
     hidden = held_out(cases)
-    chosen = [c for c in cases if (c.name in hidden) == args.held_out and args.only in c.name]
+    wanted = [w.strip() for w in args.only.split(";")]
+    chosen = [c for c in cases if (c.name in hidden) == args.held_out and any(w in c.name for w in wanted)]
+    import pendulab
+
     print(f"{len(chosen)} cases ({'held out' if args.held_out else 'development'}), {args.jobs} at a time; "
-          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}", flush=True)
+          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}; pendulab from {os.path.dirname(pendulab.__file__)}", flush=True)
     rows = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for row in pool.map(run_case, chosen):  # in the corpus's order, each as it is done

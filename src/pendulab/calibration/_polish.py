@@ -321,6 +321,116 @@ class Space:
         return np.concatenate([r, math.sqrt(weight) * (thetas - centre[None, :])], axis=1)
 
 
+def costs(logs: list[Anchors], space: Space, thetas: np.ndarray, max_substep: float = MAX_SUBSTEP) -> np.ndarray:
+    """The replay cost (sum of squared weighted errors) of each of ``thetas`` ``(m, n)``; a failed replay costs 1e6 per error."""
+    R = np.nan_to_num(space.residuals(logs, np.atleast_2d(thetas), max_substep), nan=1e6)
+    return np.einsum("ij,ij->i", R, R)
+
+
+#: Scaled together in the common-scale direction: the gain, the forces and the drags together change
+#: only the inertia's share of the motion (quasi-static motion, ``gain V = (B + Beq) v + F``, is blind to it).
+SCALED = ("F1", "F2", "B", "Beq", "force_gain")
+
+
+def moved(space: Space, theta: np.ndarray, direction: str, x: float) -> np.ndarray:
+    """``theta`` moved by ``x`` along ``direction``: a fitted name (its log), ``"scale"`` (every one of
+    :data:`SCALED` by ``exp(x)``) or ``"split"`` (the share of ``B`` in ``B + Beq``, in logit units)."""
+    names = space.names
+    v = theta * space.scales
+    if direction == "scale":
+        for j, n in enumerate(names):
+            if n in SCALED:
+                v[j] *= math.exp(x)
+    elif direction == "split":
+        i, j = names.index("B"), names.index("Beq")
+        total = v[i] + v[j]
+        share = min(max(v[i] / max(total, 1e-300), 1e-6), 1 - 1e-6)
+        share = 1.0 / (1.0 + math.exp(-(math.log(share / (1 - share)) + x)))
+        v[i], v[j] = share * total, (1 - share) * total
+    else:
+        v[names.index(direction)] *= math.exp(x)
+    return space.project(v / space.scales)
+
+
+def directions_of(names: tuple[str, ...]) -> tuple[str, ...]:
+    """The scan directions for the fitted ``names``: the common scale, the drag split, then each name."""
+    out = []
+    if "force_gain" in names and any(n in SCALED for n in names if n != "force_gain"):
+        out.append("scale")
+    if "B" in names and "Beq" in names:
+        out.append("split")
+    return (*out, *names)
+
+
+#: The slip region's end speeds (m/s) the drag split is scanned with (:func:`scan_directions`).
+SLIP_SPEEDS = (0.01, 0.03, 0.06, 0.12)
+
+
+def _logit_share(space: Space, theta: np.ndarray) -> float:
+    """``log(B / Beq)``: the share of ``B`` in the drag in logit units."""
+    i, j = space.names.index("B"), space.names.index("Beq")
+    b, e = max(theta[i] * space.scales[i], 1e-9), max(theta[j] * space.scales[j], 1e-9)
+    return math.log(b / e)
+
+
+def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans: tuple[float, ...] = (math.log(3.0), math.log(3.0) / 8),
+                    points: int = 16, rounds: int = 2) -> Polished:
+    """Robust 1-D scans of the replay cost along every direction of :func:`directions_of`, ``rounds`` times.
+
+    Each scan (coarse, then fine around the best) is one batched replay of the current point and
+    ``points`` offsets within ``span`` (the split four times wider, in logit units); the best is kept.
+    A scan sees another basin along its axis, where a local search sees only the slope: the slow logs'
+    traps (``B`` folded into ``Beq``; every force and drag at a wrong common scale) lie along these axes.
+    """
+    theta = space.project(np.asarray(theta, dtype=float).copy())
+    cost = start = float(costs(logs, space, theta[None])[0])
+    replays = 1
+    names = space.names
+    for _ in range(rounds):
+        for d in directions_of(names):
+            for span in spans:
+                coarse = span == spans[0]
+                if d == "split" and coarse:  # every share of B in the drag, from 1 % to 99 %
+                    trials = np.array([theta] + [moved(space, theta, d, x - _logit_share(space, theta)) for x in np.linspace(-4.6, 4.6, points)])
+                else:
+                    X = np.r_[0.0, np.linspace(-span, span, points)] * (4.0 if d == "split" else 1.0 if d == "scale" else 2.0)
+                    trials = np.array([moved(space, theta, d, x) for x in X])
+                if d == "split" and "v2" in names and coarse:
+                    # B acts only below v2: out of the trap "B = 0, Beq = the whole drag" the split
+                    # lowers the cost only with a slip region the cart's speeds reach.
+                    j = names.index("v2")
+                    extra = []
+                    for v2 in SLIP_SPEEDS:
+                        grid = trials.copy()
+                        grid[:, j] = v2 / space.scales[j]
+                        extra += [space.project(th) for th in grid]
+                    trials = np.vstack([trials, extra])
+                c = costs(logs, space, trials)
+                replays += 1
+                k = int(np.argmin(c))
+                if c[k] < cost:
+                    theta, cost = trials[k], float(c[k])
+        for a_, b_ in GRID_PAIRS:
+            if a_ in names and b_ in names:  # the slip region's corner: where the cart leaves it by force or by speed
+                i, j = names.index(a_), names.index(b_)
+                f = np.exp(np.linspace(-2 * spans[0], 2 * spans[0], 8))
+                trials = np.tile(theta, (f.size**2, 1))
+                trials[:, i] *= np.repeat(f, f.size)
+                trials[:, j] *= np.tile(f, f.size)
+                trials = np.array([theta] + [space.project(th) for th in trials])
+                c = costs(logs, space, trials)
+                replays += 1
+                k = int(np.argmin(c))
+                if c[k] < cost:
+                    theta, cost = trials[k], float(c[k])
+    return Polished(theta, cost, start, rounds, replays)
+
+
+#: Pairs scanned on a grid (a factor 9 both ways each): leaving the slip region happens at
+#: ``min(F2, (B + Beq) v2)`` of drive, so a wrong ``F2`` is right only with its own ``v2``.
+GRID_PAIRS = (("F2", "v2"),)
+
+
 def polish(
     logs: list[Anchors],
     space: Space,
@@ -509,17 +619,24 @@ def correlation_length(residuals: np.ndarray, sizes: list[int]) -> float:
 
 
 def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 3e-3) -> Profile:
-    """The replay cost along each parameter (the others held) by :data:`PROFILE_OFFSETS` both ways.
+    """The replay cost along each parameter (the others held), and along the joint directions, both ways.
 
-    The threshold is one effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error
-    at the answer, ``k`` its :func:`correlation_length`), at least the cost of one stretch between
-    restarts. A side where the cost crosses it bounds the
-    parameter there (the crossing interpolated in the log-offset); crossed both ways, the parameter is
-    determined and its uncertainty is the larger half-width, at least the linearized covariance of the
-    determined parameters (central differences of relative ``step``, in the same batched replay).
+    Each parameter and each joint direction of :func:`directions_of` (the common scale of the gain, the
+    forces and the drags; the split of the drag between ``B`` and ``Beq``) is moved by
+    :data:`PROFILE_OFFSETS` (log units; four times those in logit units for the split) both ways. The
+    threshold is one effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error at the
+    answer, ``k`` its :func:`correlation_length`), at least the cost of one stretch between restarts. A
+    side where the cost crosses it bounds the move there (the crossing interpolated in the offset);
+    crossed both ways, the parameter is determined and its uncertainty is the larger half-width, at least
+    the linearized covariance of the determined parameters (central differences of relative ``step``, in
+    the same batched replay) and at least its change along a joint direction's half-width. A joint
+    direction that the cost does not bound both ways leaves none of its parameters determined: a slow
+    log that never shows the inertia cannot tell the force gain from a common scale of everything.
     """
     n = len(theta)
     offsets = np.array(PROFILE_OFFSETS)
+    joint = [d for d in directions_of(space.names) if d in ("scale", "split")]
+    widths = {d: 4.0 if d == "split" else 1.0 for d in joint}
     trials = [theta]
     for j in range(n):
         for sign in (1.0, -1.0):
@@ -527,6 +644,8 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
                 th = theta.copy()
                 th[j] = theta[j] * math.exp(sign * o)
                 trials.append(th)
+    for d in joint:
+        trials += [moved(space, theta, d, sign * o * widths[d]) for sign in (1.0, -1.0) for o in offsets]
     size = step * np.abs(theta)
     trials += list(theta + np.diag(size)) + list(theta - np.diag(size))
     R = np.nan_to_num(replay_errors(logs, space.vectors(np.clip(np.array(trials), space.lower, space.upper)), space.names), nan=1e6)
@@ -536,20 +655,25 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     # At least one stretch between restarts' worth of cost: a replay's errors are correlated further than
     # their autocorrelation shows (a threshold crossed or not shifts a whole stretch).
     threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
-    status, sigma, allowed = [], np.full(n, math.inf), []
     m = len(offsets)
-    for j in range(n):
-        reach = []
+
+    def reach(first: int) -> tuple[float, float]:
+        """How far (offset units) the cost stays below the threshold up and down, from trial ``first``."""
+        out = []
         for side in range(2):
-            c = costs[1 + (2 * j + side) * m : 1 + (2 * j + side + 1) * m]
+            c = costs[first + side * m : first + (side + 1) * m]
             above = np.flatnonzero(c > cost0 + threshold)
             if not above.size:
-                reach.append(math.inf)
+                out.append(math.inf)
                 continue
             i = int(above[0])
             lo_o, lo_c = (0.0, cost0) if i == 0 else (offsets[i - 1], max(c[i - 1], cost0))
-            reach.append(lo_o + (offsets[i] - lo_o) * (cost0 + threshold - lo_c) / max(c[i] - lo_c, 1e-300))
-        up, down = reach
+            out.append(lo_o + (offsets[i] - lo_o) * (cost0 + threshold - lo_c) / max(c[i] - lo_c, 1e-300))
+        return out[0], out[1]
+
+    status, sigma, allowed = [], np.full(n, math.inf), []
+    for j in range(n):
+        up, down = reach(1 + 2 * j * m)
         allowed.append((theta[j] * math.exp(-down) if math.isfinite(down) else 0.0, theta[j] * math.exp(up) if math.isfinite(up) else math.inf))
         if math.isfinite(up) and math.isfinite(down):
             status.append(DETERMINED)
@@ -557,12 +681,22 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         else:
             status.append(BOUNDED if math.isfinite(up) or math.isfinite(down) else NOT_IDENTIFIED)
     determined = [j for j in range(n) if status[j] == DETERMINED]
+    base = 1 + 2 * n * m + 2 * m * len(joint)
     if determined:
-        base = 1 + 2 * n * m
         J = ((R[base : base + n] - R[base + n : base + 2 * n]) / (2 * size[:, None])).T[:, determined]
         covariance = np.linalg.pinv(J.T @ J) * threshold
         sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.diag(covariance), 0.0, None)))
-    for j in determined:  # correlated with the others so far that it is uncertain by half its value: only bounded
-        if sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]):
+    for i, d in enumerate(joint):
+        up, down = reach(1 + 2 * n * m + 2 * i * m)
+        ends = [moved(space, theta, d, x * widths[d]) for x in (up, -down) if math.isfinite(x)]
+        for j, name in enumerate(space.names):
+            if name not in (SCALED if d == "scale" else ("B", "Beq")) or status[j] != DETERMINED:
+                continue
+            if len(ends) == 2:
+                sigma[j] = max(sigma[j], max(abs(e[j] - theta[j]) for e in ends))
+            else:  # the joint move is not bounded both ways: neither is this parameter
+                status[j], sigma[j] = BOUNDED, math.inf
+    for j in range(n):  # correlated with the others so far that it is uncertain by half its value: only bounded
+        if status[j] == DETERMINED and sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]):
             status[j], sigma[j] = BOUNDED, math.inf
     return Profile(tuple(status), sigma, tuple(allowed), threshold, k)

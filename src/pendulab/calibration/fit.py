@@ -49,7 +49,13 @@ all. The answer is polished on the replay of the logs through the plant under th
 law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel): scans of ``F1``,
 ``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; while the replay
 still misses by more than two encoder steps, grids over the pairs that make slanted valleys
-(``v2`` with ``F2``, ``v1`` and ``B``) and the pattern search again. A logged voltage with sample
+(``v2`` with ``F2``, ``v1`` and ``B``) and the pattern search again; then, while it still misses, robust
+1-D scans on the replay (:func:`pendulab.calibration._polish.scan_directions`) along what slow logs
+confuse, each followed by the pattern search: the common scale of the force gain, the forces and the
+drags (quasi-static motion, ``gain V = (B + Beq) v + F``, is blind to it; only the inertia of the
+breakaways sees it), the split of the drag between ``B`` and ``Beq`` (with the slip region's end speed:
+a slow log's wrong basin folds ``B`` into ``Beq`` and drops the slip region), the corner ``F2, v2``,
+and each parameter over a factor 9. A scan sees another basin along its axis; a local search only the slope. A logged voltage with sample
 noise (a measured one) is replayed denoised where that replays the motion better (split at its steps,
 then L1 trend filtering: steps, ramps and holds are kept): noise on a level just below a threshold
 would otherwise break the cart away in the replay.
@@ -65,7 +71,10 @@ parameter around the answer: risen by one effective chi-square unit both ways, t
 *determined* and that half-width (at least the linearized covariance, which keeps ``Beq`` and the
 force gain off together) is its standard uncertainty; one way only, it is *bounded* (e.g. every push
 exceeds ``F1``: ``F1`` only bounded above); flat, *not identified*, and it keeps its start value. The
-calibration file says which (``metadata.determination``); a log that determines nothing is refused.
+profile also runs along the common scale and the drag split: where the cost does not rise both ways
+along one of them, none of its parameters is reported determined (a slow log that never shows the
+inertia cannot tell the force gain from a common scale of everything). The calibration file says
+which (``metadata.determination``); a log that determines nothing is refused.
 
 *The start* (:func:`ramp_start`, the one rule for the Python API and ``pendulab fit``): the friction
 from the ramp-test extraction where the logs are ramp tests, else ``params0``.
@@ -336,6 +345,9 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
 #: Above this replay RMS (encoder steps) the polish also grids the pairs that make slanted valleys.
 REFINE_ABOVE_STEPS = 2.0
 REFINE_ROUNDS = 2
+#: Then at most this many rounds of scans along the joint directions and polish, while one lowers the cost by SCAN_GAIN.
+SCAN_CYCLES = 3
+SCAN_GAIN = 0.02
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
 POLISH_WORK = 1.4e7
 #: The smoothed fit sees at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
@@ -688,6 +700,17 @@ def fit_parameters(
                 result = result.then(_polish.polish(filtered, space, result.theta, max_iter=polish_iter, scan=()), replays=1)
                 replays = filtered if searched is replays else [_polish.denoised(a) for a in replays]
                 searched = filtered
+        for _ in range(SCAN_CYCLES):
+            if result.cost <= target:
+                break
+            # Still more than a couple of encoder steps: scans along what slow logs confuse (the common
+            # scale of the gain, forces and drags; B folded into Beq with the slip region gone; each
+            # parameter over a factor 9), which see other basins a local search cannot, then the polish.
+            scanned = _polish.scan_directions(searched, space, result.theta)
+            if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
+                break
+            result = result.then(_polish.polish(searched, space, scanned.theta, max_iter=polish_iter, scan=()), replays=scanned.replays)
+            progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
         if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
             result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
         errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
