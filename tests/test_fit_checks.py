@@ -118,3 +118,30 @@ def test_a_bad_old_lab_folder_is_one_line_exit_2(capsys, tmp_path):
     folder.mkdir()
     status, _, err = run(capsys, "fit", str(folder))
     assert status == 2 and err.count("\n") == 1 and "holds no .mat files" in err
+
+
+def test_an_answer_that_misses_the_logs_reports_nothing_determined():
+    # Issue 19: on a slow-ramp log the search stopped where B had folded into Beq (Beq +780 %, replay 4.5
+    # encoder steps) and the profile around that point called Beq determined to a few per cent.
+    from pendulab.calibration.fit import CONFIDENT_STEPS, FitResult, confidence_of
+
+    q = TRUE.q_x
+    found = ("determined", "determined", "bounded", "not identified")
+    sigma = np.array([0.01, 0.02, math.inf, math.inf])
+    status, out, note = confidence_of(found, sigma, 1.0 * CONFIDENT_STEPS * q, q)
+    assert status == found and np.array_equal(out, sigma) and note == ""  # replays well: the profile stands
+    status, out, note = confidence_of(found, sigma, 1.5 * CONFIDENT_STEPS * q, q)
+    assert status == ("bounded", "bounded", "bounded", "not identified") and np.all(np.isinf(out))
+    assert f"misses the logs by {1.5 * CONFIDENT_STEPS:.1f} encoder steps" in note and "--start" in note
+    # The calibration file and the summary carry the reason.
+    params = PlantParameters.preset("none")
+    result = FitResult(
+        names=("Beq", "force_gain"), values={"Beq": 30.0, "force_gain": 0.8}, initial={"Beq": 4.3, "force_gain": 1.0},
+        uncertainty={"Beq": math.inf, "force_gain": math.inf}, residual_rms=1e-4, params=params, n_samples=10, n_intervals=1,
+        iterations=0, success=True, status="test", seconds=0.0, encoder_step=q, forward_rms=1.5 * CONFIDENT_STEPS * q,
+        determination={"Beq": "bounded", "force_gain": "bounded"}, allowed={"Beq": (20.0, 40.0), "force_gain": (0.7, 0.9)},
+        confidence=note,
+    )
+    meta = result.to_calibration().metadata
+    assert meta["determination_note"] == note and meta["uncertainty"] == {"Beq": None, "force_gain": None}
+    assert result.summary().splitlines()[-1] == note

@@ -182,6 +182,8 @@ class FitResult:
     determination: dict[str, str] = field(default_factory=dict)
     #: Per fitted parameter: the range ``(low, high)`` over which the replay stays as good (0 or inf: no limit).
     allowed: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: Why nothing is reported determined although the profile found something (see :func:`confidence_of`); "" if not so.
+    confidence: str = ""
 
     @property
     def forward_limit(self) -> float:
@@ -207,6 +209,7 @@ class FitResult:
         p = self.params
         record = {
             "determination": dict(self.determination),
+            **({"determination_note": self.confidence} if self.confidence else {}),
             "allowed_range": {n: [finite(a), finite(b)] for n, (a, b) in self.allowed.items()},
             "kept_start_value": [n for n, s in self.determination.items() if s == "not identified"],
             "method": "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law",
@@ -250,6 +253,8 @@ class FitResult:
             f"{self.forward_limit * 1e6:.0f} um RMS)"
             + ("; the logged voltage is noisy and was replayed denoised (L1 trend filter, split at its steps)" if self.voltage_filtered else "")
         )
+        if self.confidence:
+            lines.append(self.confidence)
         return "\n".join(lines)
 
 
@@ -259,6 +264,12 @@ class FitResult:
 #: the noise and the quantization (about one step); good fits of logs of several shapes miss by 1 to
 #: 12 steps, while values 16 % off, or wrong units, miss by hundreds.
 FORWARD_LIMIT_STEPS = 20.0
+#: Above this forward-simulation RMS (encoder steps) the fit reports no parameter as determined. The
+#: profile only sees the basin the search ended in: on a slow-ramp log of an unseen rig the search
+#: stopped where the drag B had folded into Beq (Beq +780 %, replay 4.5 steps, while the true values
+#: replay within 1), and the profile around that point called Beq determined to a few per cent. A fit
+#: that found the log's own answer replays within about two steps (the corpus: 0.9 to 2.5).
+CONFIDENT_STEPS = 3.0
 
 # ---------------------------------------------------------------------- the fit's model
 #: Widths of the smoothed stick-slip switches, relative to the thresholds they smooth.
@@ -791,13 +802,17 @@ def fit_parameters(
     forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
     progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
 
+    status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, float(params0.q_x))
+    if confidence:
+        progress(confidence)
     return FitResult(
         names=names,
         values=values,
         initial={n: float(v) for n, v in zip(names, start_values)},
         uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
         uncertainty_method=uncertainty_method,
-        determination=dict(zip(names, prof.status)),
+        determination=dict(zip(names, status)),
+        confidence=confidence,
         allowed={n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)},
         restarts=sum(len(a.restarts) for a in replays),
         voltage_filtered=any(a.denoised for a in replays),
@@ -815,6 +830,55 @@ def fit_parameters(
         encoder_step=float(params0.q_x),
         travel=max(float(np.ptp(e.log.x[: e.used])) for e in whole),
     )
+
+
+def confidence_of(
+    status: Sequence[str], sigma: np.ndarray, forward_rms: float, step: float
+) -> tuple[tuple[str, ...], np.ndarray, str]:
+    """What may be claimed of the answer, given how well it replays the logs.
+
+    Parameters
+    ----------
+    status : sequence of str
+        The profile's status of each parameter (``"determined"``, ``"bounded"``, ``"not identified"``).
+    sigma : ndarray
+        The profile's standard uncertainties (any unit; ``inf`` where not determined).
+    forward_rms : float
+        RMS position error of the forward simulation of the whole logs with the answer (m).
+    step : float
+        The cart encoder's step (m).
+
+    Returns
+    -------
+    status, sigma, note
+        Unchanged, with an empty note, when the replay is within :data:`CONFIDENT_STEPS` encoder steps.
+        Otherwise every "determined" becomes "bounded" with no uncertainty, and the note says why: a
+        profile around a point that misses the logs says nothing about where the logs' own answer lies.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> confidence_of(("determined", "bounded"), np.array([0.1, np.inf]), 30e-6, 22.75e-6)[0]
+    ('determined', 'bounded')
+    >>> status, sigma, note = confidence_of(("determined", "bounded"), np.array([0.1, np.inf]), 100e-6, 22.75e-6)
+    >>> status, sigma.tolist()
+    (('bounded', 'bounded'), [inf, inf])
+    >>> note.startswith("the answer misses the logs by 4.4 encoder steps")
+    True
+    """
+    from pendulab.calibration import _polish
+
+    steps = forward_rms / max(step, 1e-6)
+    if steps <= CONFIDENT_STEPS:
+        return tuple(status), np.asarray(sigma, dtype=float), ""
+    demoted = tuple(_polish.BOUNDED if s == _polish.DETERMINED else s for s in status)
+    sigma = np.where([s == _polish.DETERMINED for s in status], math.inf, np.asarray(sigma, dtype=float))
+    note = (
+        f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
+        f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
+        f"an uncertainty; fit again with another --start, or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
+    )
+    return demoted, sigma, note
 
 
 def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[PlantParameters, str]:
