@@ -31,6 +31,43 @@ SOURCE = "state_space.c"
 FUNCTIONS = ("ode", "outputs", "rk4", "ode_regime", "indicators", "event")
 
 
+def generate_c(functions: Sequence[ca.Function], directory: Path, stem: str) -> Path:
+    """Write the C code of CasADi ``functions`` to ``directory/stem.c`` (and its header ``stem.h``).
+
+    The one code generator of the models' C: the FMUs carry it, and the firmware twin
+    (``firmware/twin/gen_plant.py``) links the same text.
+
+    Parameters
+    ----------
+    functions : sequence of casadi.Function
+        The functions, e.g. :attr:`pendulab.model.plant.PlantModel.functions`.
+    directory : pathlib.Path
+        Where to write (created if missing).
+    stem : str
+        The files' name without suffix.
+
+    Returns
+    -------
+    pathlib.Path
+        The ``.c`` file.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pendulab.model.seesaw import SeesawModel
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = generate_c(SeesawModel().functions, Path(tmp), "seesaw_casadi")
+    ...     "seesaw_rk4" in path.read_text(), path.with_suffix(".h").exists()
+    (True, True)
+    """
+    directory.mkdir(parents=True, exist_ok=True)
+    generator = ca.CodeGenerator(f"{stem}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
+    for function in functions:
+        generator.add(function)
+    generator.generate(str(directory) + "/")
+    return directory / f"{stem}.c"
+
+
 @dataclass(frozen=True)
 class StateSpaceFmu:
     """What one CasADi state-space FMU is made of.
@@ -119,11 +156,8 @@ class StateSpaceFmu:
         with tempfile.TemporaryDirectory() as tmp:
             # The generated equations; any change to the model changes the text and so the GUID.
             stem = f"{self.prefix}_casadi"
-            generator = ca.CodeGenerator(f"{stem}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
-            for function in self.functions:
-                generator.add(function)
-            generator.generate(tmp + "/")
-            generated = {f"{stem}.c": (Path(tmp) / f"{stem}.c").read_text(), f"{stem}.h": (Path(tmp) / f"{stem}.h").read_text()}
+            source = generate_c(self.functions, Path(tmp), stem)
+            generated = {source.name: source.read_text(), f"{stem}.h": source.with_suffix(".h").read_text()}
         first_state, first_output = next(iter(self.states)), next(iter(self.outputs))
         return ModelSpec(
             identifier=self.identifier,
