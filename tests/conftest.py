@@ -112,3 +112,18 @@ def seesaw3_fmu() -> Path:
     from pendulab.fmu.build import ensure_fmu
 
     return ensure_fmu("Seesaw3")
+
+
+@pytest.fixture(scope="session")
+def ramp_test_fit(tmp_path_factory: pytest.TempPathFactory):
+    """The calibrate ramp test's log of the test rig (one iteration, 10 um of position noise) as a CSV file,
+    and the Python API's fit of it: ``(log, path, result)``. A fit takes tens of seconds, so the fit's test
+    files share this one (the command line's fit of the same log must give the same answer: test_fit_checks)."""
+    from pendulab.calibration.fit import fit_parameters
+    from pendulab.calibration.logs import write_log
+    from pendulab.calibration.synthetic import TEST_RIG, calibrate_ramp_log
+    from pendulab.model.parameters import PlantParameters
+
+    log = calibrate_ramp_log(TEST_RIG, iterations=1, noise=1e-5, seed=3)
+    path = write_log(log, tmp_path_factory.mktemp("ramp_test") / "ramp.csv")
+    return log, path, fit_parameters([log], PlantParameters.preset("none"))  # from the lab defaults and the log's ramps

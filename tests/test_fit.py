@@ -9,7 +9,7 @@ import pytest
 
 from pendulab.calibration.fit import fit_parameters, plot_fit, ramp_start
 from pendulab.calibration.logs import RampLog
-from pendulab.calibration.synthetic import TEST_RIG, calibrate_ramp_log
+from pendulab.calibration.synthetic import TEST_RIG
 from pendulab.errors import CalibrationError, FitRejected
 from pendulab.model.parameters import PlantParameters
 
@@ -17,11 +17,11 @@ TRUE = TEST_RIG
 
 
 @pytest.fixture(scope="module")
-def result():
-    log = calibrate_ramp_log(TRUE, iterations=1, noise=1e-5, seed=3)
+def result(ramp_test_fit):
+    log, _, fitted = ramp_test_fit  # conftest: the calibrate ramp test's log, fitted from the lab defaults
     counts = log.x / TRUE.q_x
     assert np.allclose(counts, np.round(counts))  # quantized to the encoder step
-    return log, fit_parameters([log], PlantParameters.preset("none"))  # from the lab defaults and the log's ramps
+    return log, fitted
 
 
 def test_fit_recovers_Beq_force_gain_and_F1(result):
