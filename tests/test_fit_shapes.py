@@ -12,9 +12,13 @@ import math
 import numpy as np
 import pytest
 
-from pendulab.calibration._polish import rests  # private: the fit's rest detection is checked on known shapes
+from pendulab.calibration._polish import (
+    rests,  # private: the fit's rest detection is checked on known shapes
+    voltage_noise,  # private: the fit's estimate of the logged voltage's noise
+)
 from pendulab.calibration._replay import replay  # private: the fit's replay (restarts at rests) is checked
 from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, the reference replay
+from pendulab.calibration.extract import motor_constants
 from pendulab.calibration.fit import fit_parameters
 from pendulab.calibration.synthetic import TRUE, closed_loop_log, closed_loop_params, synthetic_log
 from pendulab.model.parameters import PlantParameters
@@ -62,6 +66,11 @@ def test_each_parameter_is_determined_within_three_sigmas_or_reported_bounded_or
             assert status in ("bounded", "not identified") and sigma == math.inf
     # Fast steps and a sweep show the drive and the drag.
     assert result.determination["Beq"] == result.determination["force_gain"] == "determined"
+    if voltage_noise(log.V) > 1e-3:  # a force threshold is no better known than the noisy voltage it is read against
+        K, _ = motor_constants(TRUE.with_values(force_gain=1.0))
+        for name in ("F1", "F2"):
+            if result.determination[name] == "determined":
+                assert result.uncertainty[name] >= 0.99 * result.values["force_gain"] * K * voltage_noise(log.V)
 
 
 def test_closed_loop_run_with_the_pendulum_up_uses_the_angle():

@@ -580,6 +580,8 @@ def refine_pairs(
 #: Log-offsets of the profile (each side): 0.3 % to a factor 2.
 PROFILE_OFFSETS = (0.003, 0.01, 0.03, 0.1, 0.3, 0.7)
 DETERMINED, BOUNDED, NOT_IDENTIFIED = "determined", "bounded", "not identified"
+#: The friction law's thresholds: the replay cost is a staircase in each (see :func:`profile`).
+THRESHOLDS = ("F1", "v1", "F2", "v2")
 #: A parameter whose uncertainty exceeds this fraction of its value is reported as bounded, not determined.
 MAX_RELATIVE_SIGMA = 0.5
 
@@ -618,6 +620,23 @@ def correlation_length(residuals: np.ndarray, sizes: list[int]) -> float:
     return max(1.0, float(np.average(lengths, weights=weights))) if lengths else 1.0
 
 
+def stretch_of(logs: list[Anchors]) -> np.ndarray:
+    """For each replay error (in the order of :func:`replay_errors`), the index of its stretch between restarts.
+
+    Examples
+    --------
+    >>> a = Anchors(np.zeros(5), np.arange(5.0), np.zeros((5, 1)), np.ones(1), np.zeros(4), {3: np.zeros(4)}, np.array([0, 3]))
+    >>> stretch_of([a, a]).tolist()
+    [0, 0, 0, 1, 1, 2, 2, 2, 3, 3]
+    """
+    out, offset = [], 0
+    for a in logs:
+        sample = np.repeat(np.arange(a.n), a.measured.shape[1])
+        out.append(offset + np.searchsorted(a.segments, sample, side="right") - 1)
+        offset += len(a.segments)
+    return np.concatenate(out)
+
+
 def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 3e-3) -> Profile:
     """The replay cost along each parameter (the others held), and along the joint directions, both ways.
 
@@ -626,7 +645,8 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     :data:`PROFILE_OFFSETS` (log units; four times those in logit units for the split) both ways. The
     threshold is one effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error at the
     answer, ``k`` its :func:`correlation_length`), at least the cost of one stretch between restarts. A
-    side where the cost crosses it bounds the move there (the crossing interpolated in the offset);
+    side where the cost crosses it bounds the move there (the crossing interpolated in the offset; for
+    the thresholds of :data:`THRESHOLDS`, whose cost is a staircase, the first offset seen above);
     crossed both ways, the parameter is determined and its uncertainty is the larger half-width, at least
     the linearized covariance of the determined parameters (central differences of relative ``step``, in
     the same batched replay) and at least its change along a joint direction's half-width. A joint
@@ -657,8 +677,12 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
     m = len(offsets)
 
-    def reach(first: int) -> tuple[float, float]:
-        """How far (offset units) the cost stays below the threshold up and down, from trial ``first``."""
+    def reach(first: int, staircase: bool = False) -> tuple[float, float]:
+        """How far (offset units) the cost stays below the threshold up and down, from trial ``first``.
+
+        Interpolated between the offsets; for a ``staircase`` (a threshold: the cost jumps where a push
+        breaks the cart away or not) the first offset seen above, since a jump has no slope to interpolate.
+        """
         out = []
         for side in range(2):
             c = costs[first + side * m : first + (side + 1) * m]
@@ -668,12 +692,12 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
                 continue
             i = int(above[0])
             lo_o, lo_c = (0.0, cost0) if i == 0 else (offsets[i - 1], max(c[i - 1], cost0))
-            out.append(lo_o + (offsets[i] - lo_o) * (cost0 + threshold - lo_c) / max(c[i] - lo_c, 1e-300))
+            out.append(offsets[i] if staircase else lo_o + (offsets[i] - lo_o) * (cost0 + threshold - lo_c) / max(c[i] - lo_c, 1e-300))
         return out[0], out[1]
 
     status, sigma, allowed = [], np.full(n, math.inf), []
     for j in range(n):
-        up, down = reach(1 + 2 * j * m)
+        up, down = reach(1 + 2 * j * m, space.names[j] in THRESHOLDS)
         allowed.append((theta[j] * math.exp(-down) if math.isfinite(down) else 0.0, theta[j] * math.exp(up) if math.isfinite(up) else math.inf))
         if math.isfinite(up) and math.isfinite(down):
             status.append(DETERMINED)
@@ -684,8 +708,17 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     base = 1 + 2 * n * m + 2 * m * len(joint)
     if determined:
         J = ((R[base : base + n] - R[base + n : base + 2 * n]) / (2 * size[:, None])).T[:, determined]
-        covariance = np.linalg.pinv(J.T @ J) * threshold
-        sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.diag(covariance), 0.0, None)))
+        inverse = np.linalg.pinv(J.T @ J)
+        covariance = inverse * threshold
+        # Cluster-robust (sandwich) covariance with the stretches between restarts as clusters: a replay's
+        # errors within a stretch share one cause (a breakaway early or late, a restart's state), and the
+        # model's own errors pull each stretch its own way; their scatter is an uncertainty too.
+        clusters = stretch_of(logs)
+        scores = np.zeros((int(clusters.max()) + 1, len(determined)))
+        np.add.at(scores, clusters, J * r0[:, None])
+        S = scores.shape[0]
+        robust = inverse @ (scores.T @ scores) @ inverse * (S / max(S - len(determined), 1))
+        sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.maximum(np.diag(covariance), np.diag(robust)), 0.0, None)))
     for i, d in enumerate(joint):
         up, down = reach(1 + 2 * n * m + 2 * i * m)
         ends = [moved(space, theta, d, x * widths[d]) for x in (up, -down) if math.isfinite(x)]

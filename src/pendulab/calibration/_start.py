@@ -9,9 +9,12 @@ things any log of a moving cart shows, without recognising a ramp test:
   speed ``v`` and acceleration ``a`` of the smoothed log. That is linear in ``force_gain`` and
   ``Beq``: a least-squares fit on the fastest samples, trimmed of those that do not fit (the slip
   region's drag, the edges of a step);
-* **the breakaway force** (:func:`breakaway_voltage`): at every rest of the cart, the largest voltage
-  it held without moving is a lower bound of ``F1``, and the voltage where it broke away while the
-  voltage rose slowly is an upper bound.
+* **the breakaway force** (:func:`breakaway_bounds`, :func:`breakaway_voltage`): at every rest of the
+  cart, the largest voltage it held without moving is a lower bound of ``F1``, and the voltage it broke
+  away at is an upper bound;
+* **the slip region** (:func:`slip_region`): with the drive and ``Beq`` known, the friction each sample
+  needed is ``B v`` in the slip region and 0 beyond it, so ``B`` and ``v2`` can be read off a log that
+  shows both.
 
 Examples
 --------
@@ -111,11 +114,12 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     return gain, max(Beq, 0.0)
 
 
-def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
-    """The voltage of the breakaway force ``F1`` (V at rest), from the rests of the cart (None if none).
+def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None, float | None]:
+    """``(held, broke)``: the largest voltage the cart held through a rest, and the smallest at which it broke away.
 
-    The largest voltage held through a rest is a lower bound; where the voltage rose slowly into a
-    breakaway, the voltage there is an upper bound. The estimate lies between them.
+    A stuck cart feels no back-EMF, so ``F1`` lies between ``gain K held`` and ``gain K broke``. Where
+    the cart broke away, the voltage reached just before it moved is an upper bound whether it rose
+    slowly or jumped there. None where the logs show no such rest.
     """
     from pendulab.calibration._polish import REST_WINDOW, rests
 
@@ -128,12 +132,15 @@ def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
             if inside.size:
                 held.append(float(np.max(inside)))
             if stop < len(log) - 1:
-                around = np.abs(log.V[max(first, stop - 2 * w) : stop + 1])
-                # A slow rise (not a jump): the voltage at the breakaway measures the threshold.
-                if around.size > 2 and np.ptp(around) <= 0.1 * max(float(np.max(around)), 1e-6):
-                    broke.append(float(np.max(around)))
+                broke.append(float(np.max(np.abs(log.V[max(first, stop - 2 * w) : stop + 1]))))
     lower = max(held) if held else None
     upper = min((u for u in broke if lower is None or u >= lower), default=None)
+    return lower, upper
+
+
+def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
+    """The voltage of the breakaway force ``F1`` (V at rest), between :func:`breakaway_bounds` (None if none)."""
+    lower, upper = breakaway_bounds(logs, step)
     if lower is not None and upper is not None:
         return 0.5 * (lower + upper)
     if upper is not None:
@@ -144,7 +151,8 @@ def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
 
 
 def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParameters:
-    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs.
+    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs,
+    and ``B`` and ``v2`` where they show the slip region (:func:`slip_region`).
 
     What the logs cannot show keeps ``params0``'s value; logs with the pendulum keep ``params0``.
     """
@@ -163,4 +171,60 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
         K, _ = motor_constants(params0.with_values(force_gain=1.0))
         F1 = gain * K * V1
         values.update(F1=F1, F2=max(params0.F2, F1 * params0.F2 / max(params0.F1, 1e-9)))
+    if drive is not None:
+        slip = slip_region(logs, params0.with_values(force_gain=gain, Beq=values["Beq"]))
+        if slip is not None:
+            values.update(B=slip[0], v2=slip[1], v1=min(params0.v1, 0.5 * slip[1]))
     return params0.with_values(**values)
+
+
+#: Speed bands (quantiles of the moving samples) in which the slip drag is read.
+SLIP_BANDS = 20
+
+
+def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float, float] | None:
+    """``(B, v2)``, the slip region's drag and end speed, read off the logs (None if they show none).
+
+    With the drive and ``Beq`` of ``params`` (:func:`drive_and_drag`), what the friction must have been
+    at each sample is ``R = gain*(K*V - b*v) - Beq*v - Mc*a``: the motor's force while stuck, ``B*v``
+    in the slip region, 0 beyond it. Over bands of speed, ``R/v`` is ``B`` up to ``v2`` and 0 above:
+    ``B`` is its median over the bands where it stands clearly above 0, ``v2`` the top of the last of
+    those. A log that never leaves the slip region (or never enters it) shows ``R/v`` near 0
+    everywhere: None.
+    """
+    from pendulab.calibration.extract import motor_constants
+
+    K, b = motor_constants(params.with_values(force_gain=1.0))
+    Mc = params.lumped_cart_mass
+    v_all, R_all = [], []
+    for log in logs:
+        v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
+        edge = max(5, int(round(SMOOTHING / log.period)))
+        keep = slice(edge, len(log) - edge)
+        R = params.force_gain * (K * V - b * v) - params.Beq * v - Mc * a
+        v_all.append(v[keep])
+        R_all.append((R * np.sign(v))[keep])
+    v, R = np.abs(np.concatenate(v_all)), np.concatenate(R_all)
+    moving = v > max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)
+    if np.count_nonzero(moving) < 10 * SLIP_BANDS:
+        return None
+    v, R = v[moving], R[moving]
+    edges = np.quantile(v, np.linspace(0.0, 1.0, SLIP_BANDS + 1))
+    band = np.clip(np.searchsorted(edges, v, side="right") - 1, 0, SLIP_BANDS - 1)
+    ratio = np.array([np.median(R[band == k] / v[band == k]) for k in range(SLIP_BANDS)])
+    # Clearly above 0: a fifth of the drag the cart feels beyond the slip region, and a fifth of the largest band.
+    floor = max(0.2 * (params.Beq + params.force_gain * b), 0.2 * float(np.max(ratio)))
+    slip = ratio > floor
+    if not np.any(slip) or np.all(slip):
+        return None
+    B = float(np.median(ratio[slip]))
+    # v2: in the last slip band and the next, the speed that best splits the samples whose drag is B
+    # (R/v above B/2) from those beyond (fewest on the wrong side).
+    last = int(np.flatnonzero(slip)[-1])
+    near = (band >= last) & (band <= last + 1)
+    order = np.argsort(v[near], kind="stable")
+    speeds, slipping = v[near][order], (R[near] / v[near] > 0.5 * B)[order]
+    wrong = np.r_[0, np.cumsum(~slipping)] + np.r_[np.cumsum(slipping[::-1])[::-1], 0]
+    k = int(np.argmin(wrong))
+    v2 = float(speeds[min(k, speeds.size - 1)]) if k == 0 else float(0.5 * (speeds[k - 1] + speeds[min(k, speeds.size - 1)]))
+    return B, v2

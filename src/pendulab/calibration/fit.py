@@ -783,10 +783,22 @@ def fit_parameters(
             "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
             f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
         )
-    uncertainty = prof.sigma
+    uncertainty = prof.sigma.copy()
+    # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
+    # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
+    volt_noise = max(_polish.voltage_noise(log.V) for log in logs)
+    if volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum:
+        from pendulab.calibration.extract import motor_constants
+
+        K, _ = motor_constants(params.with_values(force_gain=1.0))
+        for j, n in enumerate(names):
+            if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
+                uncertainty[j] = max(uncertainty[j], params.force_gain * K * volt_noise / scales[j])
     uncertainty_method = (
         "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
-        f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance of the determined ones"
+        f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance and the cluster-robust "
+        "covariance (the stretches between restarts as clusters) of the determined ones"
+        + (f"; the forces at least the drive of the logged voltage's noise ({volt_noise * 1e3:.2g} mV)" if volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum else "")
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
