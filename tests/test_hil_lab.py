@@ -172,7 +172,9 @@ def test_kill_9_of_lab_keeps_every_sample_up_to_100_ms_before(tmp_path):
 
 def test_emulator_closing_the_port_ends_lab_with_link_lost(tmp_path):
     out = tmp_path / "lost"
-    with emulator("--raise-after", "0.2", "--close-after", "2.5") as emu:
+    # The port closes 6 s after the host connects: a slow machine's lab took 2.4 s from connecting to
+    # streaming (89 samples logged before a close at 2.5 s), and the log must show streaming ended by it.
+    with emulator("--raise-after", "0.2", "--close-after", "6") as emu:
         result = lab("--port", emu.port, "--demo", "--delay", "1", "--out", str(out), stdin="s\n")
     assert result.returncode != 0
     assert "link lost" in result.stdout
