@@ -188,8 +188,8 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     With the drive and ``Beq`` of ``params`` (:func:`drive_and_drag`), what the friction must have been
     at each sample is ``R = gain*(K*V - b*v) - Beq*v - Mc*a``: the motor's force while stuck, ``B*v``
     in the slip region, 0 beyond it. Over bands of speed, ``R/v`` is ``B`` up to ``v2`` and 0 above:
-    ``B`` is its median over the bands where it stands clearly above 0, ``v2`` the top of the last of
-    those. A log that never leaves the slip region (or never enters it) shows ``R/v`` near 0
+    ``B`` is its median over the bands where it stands clearly above 0, ``v2`` the speed that best splits
+    the samples of the last of those and the next band into drag ``B`` and none. A log that never leaves the slip region (or never enters it) shows ``R/v`` near 0
     everywhere: None.
     """
     from pendulab.calibration.extract import motor_constants
@@ -225,6 +225,6 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     order = np.argsort(v[near], kind="stable")
     speeds, slipping = v[near][order], (R[near] / v[near] > 0.5 * B)[order]
     wrong = np.r_[0, np.cumsum(~slipping)] + np.r_[np.cumsum(slipping[::-1])[::-1], 0]
-    k = int(np.argmin(wrong))
-    v2 = float(speeds[min(k, speeds.size - 1)]) if k == 0 else float(0.5 * (speeds[k - 1] + speeds[min(k, speeds.size - 1)]))
+    k = int(np.argmin(wrong))  # the split falls before sample k: v2 halfway between its neighbours
+    v2 = 0.5 * float(speeds[max(k - 1, 0)] + speeds[min(k, speeds.size - 1)])
     return B, v2

@@ -787,7 +787,8 @@ def fit_parameters(
     # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
     # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
     volt_noise = max(_polish.voltage_noise(log.V) for log in logs)
-    if volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum:
+    force_floor = volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum
+    if force_floor:
         from pendulab.calibration.extract import motor_constants
 
         K, _ = motor_constants(params.with_values(force_gain=1.0))
@@ -798,7 +799,7 @@ def fit_parameters(
         "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
         f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance and the cluster-robust "
         "covariance (the stretches between restarts as clusters) of the determined ones"
-        + (f"; the forces at least the drive of the logged voltage's noise ({volt_noise * 1e3:.2g} mV)" if volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum else "")
+        + (f"; the forces at least the drive of the logged voltage's noise ({volt_noise * 1e3:.2g} mV)" if force_floor else "")
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
