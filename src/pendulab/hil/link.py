@@ -260,19 +260,25 @@ class RigLink:
         mv = int(round(max(-32.0, min(32.0, voltage)) * 1000))
         self.send(P.Command, answers=answers, voltage_mv=mv, flags=(P.ENABLE if enable else 0) | (P.CLEAR if clear else 0))
 
-    def silence_cause(self, silent_ms: float, timeout: float = 0.3) -> Exception:
+    def silence_cause(self, silent_ms: float, timeout: float = 0.3, tries: int = 3) -> Exception:
         """Why the samples stopped: a restarted rig answers IDENTIFY with a new boot id; a dead link does not answer.
 
-        Returns (does not raise) :class:`RigRestarted` or :class:`LinkLost`, whose message says which.
+        IDENTIFY is sent up to ``tries`` times, ``timeout`` s each: on a noisy link one corrupted request or answer
+        made a restarted rig read as a lost link. Returns (does not raise) :class:`RigRestarted` or
+        :class:`LinkLost`, whose message says which.
         """
         old = self.identity
+        item = None
         try:
-            self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
-            item = self.expect(P.Identity, timeout)
+            for _ in range(tries):
+                self.send(P.Identify, protocol=P.PROTOCOL_VERSION)
+                item = self.expect(P.Identity, timeout)
+                if item is not None:
+                    break
         except LinkLost as exc:
             return exc
         if item is None:
-            return LinkLost(f"link lost: no data from the rig for {silent_ms + timeout * 1e3:.0f} ms")
+            return LinkLost(f"link lost: no data from the rig for {silent_ms + tries * timeout * 1e3:.0f} ms")
         identity: P.Identity = item[0]  # type: ignore[assignment]
         if old is not None and identity.boot_id != old.boot_id:
             return RigRestarted(f"the rig restarted (boot id {old.boot_id:#010x} -> {identity.boot_id:#010x})")
