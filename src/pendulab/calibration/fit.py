@@ -354,7 +354,7 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
 
 
 #: Above this replay RMS (encoder steps) the polish also grids the pairs that make slanted valleys.
-REFINE_ABOVE_STEPS = 2.0
+REFINE_ABOVE_STEPS = 2.5
 REFINE_ROUNDS = 2
 #: Then at most this many rounds of scans along the joint directions and polish, while one lowers the cost by SCAN_GAIN.
 SCAN_CYCLES = 3
