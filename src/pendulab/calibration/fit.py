@@ -48,7 +48,7 @@ solvable biases it, and a threshold a per cent off decides whether a push breaks
 all. The answer is polished on the replay of the logs through the plant under the true (switching)
 law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel): scans of ``F1``,
 ``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; while the replay
-still misses by more than two encoder steps, grids over the pairs that make slanted valleys
+still misses by more than 2.5 encoder steps, grids over the pairs that make slanted valleys
 (``v2`` with ``F2``, ``v1`` and ``B``) and the pattern search again; then, while it still misses, robust
 1-D scans on the replay (:func:`pendulab.calibration._polish.scan_directions`) along what slow logs
 confuse, each followed by the pattern search: the common scale of the force gain, the forces and the
