@@ -182,7 +182,8 @@ class FitResult:
     determination: dict[str, str] = field(default_factory=dict)
     #: Per fitted parameter: the range ``(low, high)`` over which the replay stays as good (0 or inf: no limit).
     allowed: dict[str, tuple[float, float]] = field(default_factory=dict)
-    #: Why nothing is reported determined although the profile found something (see :func:`confidence_of`); "" if not so.
+    #: Why a parameter the profile found determined is reported otherwise (see :func:`confidence_of` and
+    #: :func:`split_of_the_drag`); "" if none is.
     confidence: str = ""
 
     @property
@@ -803,10 +804,12 @@ def fit_parameters(
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
-    curves, forward_errors = [], []
+    curves, forward_errors, regimes = [], [], []
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(whole, replays):
-        simulated = np.r_[a.x0[0], _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0, :, 0]]
+        states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
+        simulated = np.r_[a.x0[0], states[:, 0]]
+        regimes.append(slip_shares(params, a.V, states[:, 1]))
         log, used = e.log, e.used
         curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
         forward_errors.append(simulated - log.x[:used])
@@ -816,6 +819,9 @@ def fit_parameters(
     progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
 
     status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, float(params0.q_x))
+    allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)}
+    status, uncertainty, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
+    confidence = "; ".join(note for note in (confidence, regime_note) if note)
     if confidence:
         progress(confidence)
     return FitResult(
@@ -826,7 +832,7 @@ def fit_parameters(
         uncertainty_method=uncertainty_method,
         determination=dict(zip(names, status)),
         confidence=confidence,
-        allowed={n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)},
+        allowed=allowed,
         restarts=sum(len(a.restarts) for a in replays),
         voltage_filtered=any(a.denoised for a in replays),
         residual_rms=rms,
@@ -892,6 +898,67 @@ def confidence_of(
         f"an uncertainty; fit again with another --start, or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
     )
     return demoted, sigma, note
+
+
+#: Beyond the slip region (the drag ``Beq`` alone) the cart must spend at least this share of its moving
+#: samples, and at least MIN_BEYOND_SAMPLES, for a log to tell ``B`` from ``Beq``.
+MIN_BEYOND_SHARE = 0.02
+MIN_BEYOND_SAMPLES = 50
+
+
+def slip_shares(params: PlantParameters, V: np.ndarray, xdot: np.ndarray) -> tuple[int, int]:
+    """``(inside, beyond)``: how many samples of a replay the cart moves inside the slip region and beyond it.
+
+    Moving: at least ``v1``. Inside: slower than ``v2`` with a motor force below ``F2`` (SPEC §2's law), where
+    the friction is ``B*xdot`` on top of ``Beq``; beyond, ``Beq`` alone.
+
+    Examples
+    --------
+    >>> p = PlantParameters.preset("none")             # v1 0.005, v2 0.05 m/s
+    >>> slip_shares(p, np.zeros(4), np.array([0.0, 0.01, 0.03, 0.2]))
+    (2, 1)
+    """
+    from pendulab.calibration.extract import motor_constants
+
+    K, b = motor_constants(params.with_values(force_gain=1.0))
+    speed = np.abs(xdot)
+    force = np.abs(params.force_gain * (K * np.clip(V, -params.V_max, params.V_max) - b * xdot))
+    moving = speed >= params.v1
+    inside = moving & (speed < params.v2) & (force < params.F2)
+    return int(np.count_nonzero(inside)), int(np.count_nonzero(moving & ~inside))
+
+
+def split_of_the_drag(
+    names: Sequence[str], status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]],
+    params: PlantParameters, regimes: Sequence[tuple[int, int]],
+) -> tuple[tuple[str, ...], np.ndarray, str]:
+    """``B`` and ``Beq`` as the logs can tell them apart: not where the cart never leaves the slip region.
+
+    Inside the slip region the drag is ``B + Beq`` (with the motor's own back-EMF drag): a log whose replay
+    spends fewer than :data:`MIN_BEYOND_SHARE` of its moving samples beyond it shows only that sum, whatever
+    the profile around the answer says (on a 25 s slow-ramp log of a rig whose slip region covers all the
+    motion, the search ended at Beq -62 % and B -13 %, and the profile called both determined). Both are
+    then reported bounded, between 0 and the sum (``allowed`` is updated), with a note; else unchanged.
+    """
+    from pendulab.calibration import _polish
+
+    inside, beyond = (sum(r[k] for r in regimes) for k in (0, 1))
+    moving = inside + beyond
+    if moving == 0 or "B" not in names or "Beq" not in names or beyond >= max(MIN_BEYOND_SHARE * moving, MIN_BEYOND_SAMPLES):
+        return tuple(status), sigma, ""
+    status, sigma = list(status), np.asarray(sigma, dtype=float).copy()
+    total = params.B + params.Beq
+    for name in ("B", "Beq"):
+        j = list(names).index(name)
+        if status[j] == _polish.DETERMINED:
+            status[j], sigma[j] = _polish.BOUNDED, math.inf
+        allowed[name] = (0.0, total)
+    note = (
+        f"the cart moves beyond the slip region in only {beyond} of {moving} moving samples of the replay: the logs show "
+        f"the drag B + Beq = {total:.3g} N*s/m there, not how it splits, so B and Beq are only bounded (each <= the sum); "
+        f"to tell them apart, record faster motion (larger voltages: the cart must outrun v2 = {params.v2:.3g} m/s)"
+    )
+    return tuple(status), sigma, note
 
 
 def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[PlantParameters, str]:

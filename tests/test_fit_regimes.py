@@ -1,0 +1,51 @@
+"""What a log can tell of the drag's split (issue 19, honest output): ``B`` and ``Beq`` apart only where the
+cart moves beyond the slip region, counted on the replay of the logs under the true law."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pendulab.calibration._replay import replay  # private: the fit's own replay gives the speeds it counts
+from pendulab.calibration.fit import MIN_BEYOND_SHARE, slip_shares, split_of_the_drag
+from pendulab.calibration.synthetic import RIGS, synthetic_log
+
+NAMES = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
+
+
+def shares(shape: str, rig: str, duration: float = 8.0) -> tuple[int, int]:
+    p = RIGS[rig]
+    log = synthetic_log(shape, p, duration=duration, voltage_noise=0.0)
+    states = replay([p], log.V, log.t, np.array([log.x[0], 0.0, 0.0, 0.0]))[0]
+    return slip_shares(p, log.V, states[:, 1])
+
+
+@pytest.mark.parametrize("shape", ["ramps with holds", "triangle"])
+def test_a_rig_whose_slip_region_covers_the_motion_shows_only_the_sum(shape):
+    # The "unseen" rig's slip drag (B 60) holds a 3 V push below v2 = 0.06 m/s: slow ramps and the triangle never
+    # leave the slip region (measured: 0 and 0.1 % of the moving samples beyond it).
+    inside, beyond = shares(shape, "unseen")
+    assert inside > 1000 and beyond < 0.5 * MIN_BEYOND_SHARE * (inside + beyond)
+    status = ("determined",) * len(NAMES)
+    sigma = np.full(len(NAMES), 0.01)
+    allowed: dict[str, tuple[float, float]] = {}
+    p = RIGS["unseen"]
+    new_status, new_sigma, note = split_of_the_drag(NAMES, status, sigma, allowed, p, [(inside, beyond)])
+    for name in ("B", "Beq"):
+        j = NAMES.index(name)
+        assert new_status[j] == "bounded" and math.isinf(new_sigma[j]) and allowed[name] == (0.0, p.B + p.Beq)
+    assert [s for n, s in zip(NAMES, new_status) if n not in ("B", "Beq")] == ["determined"] * 5
+    assert "B + Beq" in note and "faster motion" in note
+
+
+@pytest.mark.parametrize("shape, rig", [("chirp", "unseen"), ("random steps", "unseen"), ("ramps with holds", "sticky")])
+def test_a_log_beyond_the_slip_region_keeps_what_the_profile_says(shape, rig):
+    # (measured: 54 %, 37 % and 84 % of the moving samples beyond the slip region)
+    inside, beyond = shares(shape, rig)
+    assert beyond > 10 * MIN_BEYOND_SHARE * (inside + beyond)
+    status = ("determined",) * len(NAMES)
+    sigma = np.full(len(NAMES), 0.01)
+    allowed: dict[str, tuple[float, float]] = {}
+    assert split_of_the_drag(NAMES, status, sigma, allowed, RIGS[rig], [(inside, beyond)]) == (status, sigma, "") and not allowed
