@@ -904,6 +904,8 @@ def confidence_of(
 #: samples, and at least MIN_BEYOND_SAMPLES, for a log to tell ``B`` from ``Beq``.
 MIN_BEYOND_SHARE = 0.02
 MIN_BEYOND_SAMPLES = 50
+#: What such a log cannot determine (:func:`split_of_the_drag`).
+SLIP_ONLY_UNDETERMINED = ("B", "Beq", "force_gain", "F1", "F2", "v1", "v2")
 
 
 def slip_shares(params: PlantParameters, V: np.ndarray, xdot: np.ndarray) -> tuple[int, int]:
@@ -932,13 +934,17 @@ def split_of_the_drag(
     names: Sequence[str], status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]],
     params: PlantParameters, regimes: Sequence[tuple[int, int]],
 ) -> tuple[tuple[str, ...], np.ndarray, str]:
-    """``B`` and ``Beq`` as the logs can tell them apart: not where the cart never leaves the slip region.
+    """What a log that never leaves the slip region cannot determine, whatever the profile around the answer says.
 
     Inside the slip region the drag is ``B + Beq`` (with the motor's own back-EMF drag): a log whose replay
-    spends fewer than :data:`MIN_BEYOND_SHARE` of its moving samples beyond it shows only that sum, whatever
-    the profile around the answer says (on a 25 s slow-ramp log of a rig whose slip region covers all the
-    motion, the search ended at Beq -62 % and B -13 %, and the profile called both determined). Both are
-    then reported bounded, between 0 and the sum (``allowed`` is updated), with a note; else unchanged.
+    spends fewer than :data:`MIN_BEYOND_SHARE` of its moving samples beyond it shows only that sum. Both are
+    then reported bounded, between 0 and the sum (``allowed`` is updated). Such a log also sees the common
+    scale of the drive, the forces and that drag only through the cart's inertia over the slip region's short
+    time constant ``Mc/(B + Beq + ...)`` (about 10 ms), and the stick speed ``v1`` only through how long the
+    cart takes to slow down to it, which that time constant sets too; the slip region's ends ``v2`` and ``F2``
+    only from below (the cart never passed them). All of them are reported bounded. (On bench/fit.py's 25 s slow-ramp log of such a rig the search ended at
+    Beq -62 %, B -13 %, F1 and the force gain -18 %, v1 -76 %, and the profile called them all determined; the
+    breakaway voltage ``F1/(gain K)`` was right.) A note says why and what to record; else unchanged.
     """
     from pendulab.calibration import _polish
 
@@ -948,15 +954,16 @@ def split_of_the_drag(
         return tuple(status), sigma, ""
     status, sigma = list(status), np.asarray(sigma, dtype=float).copy()
     total = params.B + params.Beq
-    for name in ("B", "Beq"):
-        j = list(names).index(name)
-        if status[j] == _polish.DETERMINED:
+    for j, name in enumerate(names):
+        if name in SLIP_ONLY_UNDETERMINED and status[j] == _polish.DETERMINED:
             status[j], sigma[j] = _polish.BOUNDED, math.inf
-        allowed[name] = (0.0, total)
+        if name in ("B", "Beq"):
+            allowed[name] = (0.0, total)
     note = (
         f"the cart moves beyond the slip region in only {beyond} of {moving} moving samples of the replay: the logs show "
-        f"the drag B + Beq = {total:.3g} N*s/m there, not how it splits, so B and Beq are only bounded (each <= the sum); "
-        f"to tell them apart, record faster motion (larger voltages: the cart must outrun v2 = {params.v2:.3g} m/s)"
+        f"the drag B + Beq = {total:.3g} N*s/m there, not how it splits, and the force gain, the forces and v1 only through "
+        f"the cart's inertia in the slip region's short transients, and v2 and F2 only from below, so {', '.join(n for n in names if n in SLIP_ONLY_UNDETERMINED)} "
+        f"are only bounded; record faster motion (larger voltages: the cart must outrun v2 = {params.v2:.3g} m/s)"
     )
     return tuple(status), sigma, note
 
