@@ -17,7 +17,7 @@ def shares(shape: str, rig: str, duration: float = 8.0) -> tuple[int, int]:
     p = RIGS[rig]
     log = synthetic_log(shape, p, duration=duration, voltage_noise=0.0)
     states = replay([p], log.V, log.t, np.array([log.x[0], 0.0, 0.0, 0.0]))[0]
-    return slip_shares(p, log.V, states[:, 1])
+    return slip_shares(p, log.V, states)
 
 
 @pytest.mark.parametrize("shape", ["ramps with holds", "triangle"])
@@ -30,9 +30,10 @@ def test_a_rig_whose_slip_region_covers_the_motion_shows_only_the_sum(shape):
     sigma = np.full(len(NAMES), 0.01)
     allowed: dict[str, tuple[float, float]] = {}
     p = RIGS["unseen"]
-    new_status, new_sigma, note = split_of_the_drag(NAMES, status, sigma, allowed, p, [(inside, beyond)])
+    new_status, new_sigma, new_allowed, note = split_of_the_drag(NAMES, status, sigma, allowed, p, [(inside, beyond)])
     for name in ("B", "Beq"):
-        assert allowed[name] == (0.0, p.B + p.Beq)
+        assert new_allowed[name] == (0.0, p.B + p.Beq)
+    assert not allowed  # the caller's ranges are not changed in place
     assert new_status == ("bounded",) * len(NAMES) and np.all(np.isinf(new_sigma))
     assert "B + Beq" in note and "faster motion" in note
 
@@ -45,4 +46,4 @@ def test_a_log_beyond_the_slip_region_keeps_what_the_profile_says(shape, rig):
     status = ("determined",) * len(NAMES)
     sigma = np.full(len(NAMES), 0.01)
     allowed: dict[str, tuple[float, float]] = {}
-    assert split_of_the_drag(NAMES, status, sigma, allowed, RIGS[rig], [(inside, beyond)]) == (status, sigma, "") and not allowed
+    assert split_of_the_drag(NAMES, status, sigma, allowed, RIGS[rig], [(inside, beyond)]) == (status, sigma, {}, "")

@@ -809,7 +809,7 @@ def fit_parameters(
     for e, a in zip(whole, replays):
         states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
         simulated = np.r_[a.x0[0], states[:, 0]]
-        regimes.append(slip_shares(params, a.V, states[:, 1]))
+        regimes.append(slip_shares(params, a.V, states))
         log, used = e.log, e.used
         curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
         forward_errors.append(simulated - log.x[:used])
@@ -820,7 +820,7 @@ def fit_parameters(
 
     status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, float(params0.q_x))
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)}
-    status, uncertainty, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
+    status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
     confidence = "; ".join(note for note in (confidence, regime_note) if note)
     if confidence:
         progress(confidence)
@@ -908,51 +908,54 @@ MIN_BEYOND_SAMPLES = 50
 SLIP_ONLY_UNDETERMINED = ("B", "Beq", "force_gain", "F1", "F2", "v1", "v2")
 
 
-def slip_shares(params: PlantParameters, V: np.ndarray, xdot: np.ndarray) -> tuple[int, int]:
+def slip_shares(params: PlantParameters, V: np.ndarray, states: np.ndarray) -> tuple[int, int]:
     """``(inside, beyond)``: how many samples of a replay the cart moves inside the slip region and beyond it.
 
-    Moving: at least ``v1``. Inside: slower than ``v2`` with a motor force below ``F2`` (SPEC §2's law), where
-    the friction is ``B*xdot`` on top of ``Beq``; beyond, ``Beq`` alone.
+    Moving: at least ``v1``. Inside: the law's slip regime (slower than ``v2`` with a motor force below ``F2``,
+    SPEC §2), where the friction is ``B*xdot`` on top of ``Beq``; beyond, ``Beq`` alone. The regime is the
+    plant's own decision (:func:`pendulab.model.plant.friction_regimes`).
 
     Examples
     --------
     >>> p = PlantParameters.preset("none")             # v1 0.005, v2 0.05 m/s
-    >>> slip_shares(p, np.zeros(4), np.array([0.0, 0.01, 0.03, 0.2]))
+    >>> slip_shares(p, np.zeros(4), np.array([[0, 0.0, 0, 0], [0, 0.01, 0, 0], [0, 0.03, 0, 0], [0, 0.2, 0, 0]]))
     (2, 1)
     """
-    from pendulab.calibration.extract import motor_constants
+    from pendulab.model.plant import SLIP, friction_regimes
 
-    K, b = motor_constants(params.with_values(force_gain=1.0))
-    speed = np.abs(xdot)
-    force = np.abs(params.force_gain * (K * np.clip(V, -params.V_max, params.V_max) - b * xdot))
-    moving = speed >= params.v1
-    inside = moving & (speed < params.v2) & (force < params.F2)
+    moving = np.abs(states[:, 1]) >= params.v1
+    inside = moving & (friction_regimes(params, states, V) == SLIP)
     return int(np.count_nonzero(inside)), int(np.count_nonzero(moving & ~inside))
 
 
 def split_of_the_drag(
     names: Sequence[str], status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]],
     params: PlantParameters, regimes: Sequence[tuple[int, int]],
-) -> tuple[tuple[str, ...], np.ndarray, str]:
+) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What a log that never leaves the slip region cannot determine, whatever the profile around the answer says.
 
     Inside the slip region the drag is ``B + Beq`` (with the motor's own back-EMF drag): a log whose replay
     spends fewer than :data:`MIN_BEYOND_SHARE` of its moving samples beyond it shows only that sum. Both are
-    then reported bounded, between 0 and the sum (``allowed`` is updated). Such a log also sees the common
+    then reported bounded, between 0 and the sum (in the returned ``allowed``). The rule needs both ``B`` and
+    ``Beq`` fitted: with either one known, the drag the log shows fixes the other, and the common scale with it. Such a log also sees the common
     scale of the drive, the forces and that drag only through the cart's inertia over the slip region's short
     time constant ``Mc/(B + Beq + ...)`` (about 10 ms), and the stick speed ``v1`` only through how long the
     cart takes to slow down to it, which that time constant sets too; the slip region's ends ``v2`` and ``F2``
     only from below (the cart never passed them). All of them are reported bounded. (On bench/fit.py's 25 s slow-ramp log of such a rig the search ended at
     Beq -62 %, B -13 %, F1 and the force gain -18 %, v1 -76 %, and the profile called them all determined; the
     breakaway voltage ``F1/(gain K)`` was right.) A note says why and what to record; else unchanged.
+
+    Returns
+    -------
+    status, sigma, allowed, note
     """
     from pendulab.calibration import _polish
 
     inside, beyond = (sum(r[k] for r in regimes) for k in (0, 1))
     moving = inside + beyond
     if moving == 0 or "B" not in names or "Beq" not in names or beyond >= max(MIN_BEYOND_SHARE * moving, MIN_BEYOND_SAMPLES):
-        return tuple(status), sigma, ""
-    status, sigma = list(status), np.asarray(sigma, dtype=float).copy()
+        return tuple(status), sigma, dict(allowed), ""
+    status, sigma, allowed = list(status), np.asarray(sigma, dtype=float).copy(), dict(allowed)
     total = params.B + params.Beq
     for j, name in enumerate(names):
         if name in SLIP_ONLY_UNDETERMINED and status[j] == _polish.DETERMINED:
@@ -965,7 +968,7 @@ def split_of_the_drag(
         f"the cart's inertia in the slip region's short transients, and v2 and F2 only from below, so {', '.join(n for n in names if n in SLIP_ONLY_UNDETERMINED)} "
         f"are only bounded; record faster motion (larger voltages: the cart must outrun v2 = {params.v2:.3g} m/s)"
     )
-    return tuple(status), sigma, note
+    return tuple(status), sigma, allowed, note
 
 
 def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[PlantParameters, str]:

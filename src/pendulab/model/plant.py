@@ -577,6 +577,30 @@ def _regime_functions() -> tuple[ca.Function, ca.Function, ca.Function]:
 
 
 @lru_cache(maxsize=None)
+def _regime_of_state() -> ca.Function:
+    model = PlantModel()
+    state, V, pvec, t, p = model._symbols()
+    signals = plant_equations(state, V, p, t)[1]
+    return ca.Function("plant_friction_regime", [state, V, pvec], [_friction_regime(state[1], signals["F_motor"], p)])
+
+
+def friction_regimes(params: PlantParameters, states: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """The stick-slip law's regime (:data:`FREE`, :data:`SLIP` or :data:`STICK`) at each of ``states`` ``(n, 4)``
+    under the voltages ``V`` ``(n,)``, as the plant decides it (the motor's force through the amplifier).
+
+    Examples
+    --------
+    >>> p = PlantParameters.preset("none")                      # v1 0.005, v2 0.05 m/s
+    >>> states = np.array([[0, 0, 0, 0], [0, 0.01, 0, 0], [0, 0.2, 0, 0]], dtype=float)
+    >>> friction_regimes(p, states, np.zeros(3)).tolist() == [STICK, SLIP, FREE]
+    True
+    """
+    states = np.atleast_2d(np.asarray(states, dtype=float))
+    f = _regime_of_state().map(states.shape[0])
+    return np.asarray(f(states.T, np.asarray(V, dtype=float)[None, :], np.asarray(params.as_vector(), dtype=float))).ravel()
+
+
+@lru_cache(maxsize=None)
 def step_function(smooth_friction: bool, n_sub: int) -> ca.Function:
     """``n_sub`` RK4 sub-steps of the plant as one CasADi function ``plant_step(state, V, p, t, h) -> state``.
 
