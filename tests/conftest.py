@@ -52,6 +52,21 @@ def pytest_collection_modifyitems(config, items):  # noqa: ANN001
             item.add_marker(pytest.mark.flaky(reruns=2, reruns_delay=1))
 
 
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):  # noqa: ANN001
+    """pytest-xdist (``-n auto`` in pyproject.toml): a file's tests run in one process, which builds the file's
+    module fixtures once, and the real-time files all run in one process, one after the other, so that no two
+    real-time links share the machine. (Its own ``--dist loadgroup`` marks do not take with pytest 9.)"""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ByFileRealTimeTogether(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            file = nodeid.split("::", 1)[0]
+            return "realtime" if Path(file).name in REALTIME_FILES else file
+
+    return ByFileRealTimeTogether(config, log)
+
+
 @pytest.fixture(scope="session")
 def plant_fmu() -> Path:
     """Path of ``fmus/Plant.fmu``, built first if it is missing or older than its sources."""

@@ -194,19 +194,24 @@ def test_lab_demo_against_the_rig_emulator_for_5_s(wheel_env):
 def test_fit_on_the_calibrate_log_without_a_compiler(wheel_env):
     """The ramp test on the virtual rig, then ``fit`` on its log with no compiler on the PATH at all (the fake ones
     would be called, fail, and give the same fallback): CasADi's virtual machine instead of C, said to the user.
-    Here the fit is of the force gain alone, which the virtual machine does in about 25 s of CPU (the default seven
-    parameters take 85 s); the whole fit, with and without a compiler, is timed in bench/wheel.py."""
+    Here the fit is of the force gain alone, on the log's first slow ramp (up to the second centring, 3.8 s), which
+    the virtual machine does in about 15 s (the whole 14 s log takes 85 s); the whole fit, with and without a
+    compiler, is timed in bench/wheel.py."""
     env: Env = wheel_env["env"]
     calibrate = env.run("pendulab calibrate --virtual --iterations 1 --out cal.json --log ramp.csv")
     assert calibrate.returncode == 0, calibrate.stderr[-2000:]
+    lines = (env.work / "ramp.csv").read_text().splitlines()
+    second_centring = [float(re.search(r"t=([0-9.]+)", line).group(1)) for line in lines if line.startswith("# event") and line.endswith(": centring")][1]
+    first_ramp = [line for line in lines if not line[:1].isdigit() or float(line.split(",")[0]) < second_centring]  # comments, header
+    (env.work / "first-ramp.csv").write_text("\n".join(first_ramp) + "\n")
     start = time.perf_counter()
-    fit = env.run("pendulab fit ramp.csv --pendulum none --fit force_gain --out fitted.json", timeout=600, fakes=False)
+    fit = env.run("pendulab fit first-ramp.csv --pendulum none --fit force_gain --out fitted.json", timeout=600, fakes=False)
     seconds = time.perf_counter() - start
     assert fit.returncode == 0, (fit.stdout[-3000:], fit.stderr[-2000:])
     assert "no C compiler: CasADi's virtual machine" in fit.stdout + fit.stderr
     fitted = json.loads((env.work / "fitted.json").read_text())["force_gain"]
-    assert abs(fitted - 1.0) < 0.02, fitted  # the virtual rig's force gain is the model's, 1 (measured: 1.0044)
-    print(f"\nfit (force gain = {fitted:.4f}) of the 1-iteration ramp log without a compiler: {seconds:.1f} s")
+    assert abs(fitted - 1.0) < 0.02, fitted  # the virtual rig's force gain is the model's, 1 (measured: 1.0067)
+    print(f"\nfit (force gain = {fitted:.4f}) of the first ramp of a 1-iteration ramp log without a compiler: {seconds:.1f} s")
 
 
 #: The Python versions a lab PC may have.
