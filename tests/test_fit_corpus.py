@@ -1,0 +1,59 @@
+"""A representative part of bench/fit_corpus.py (issue 19), run as the bench runs it: three shapes, three rigs,
+with and without voltage noise, about 2 minutes in all. The whole corpus, with its table, is
+``python bench/fit_corpus.py``; its held-out third is not used here.
+
+Each case is judged by what the issue asks of every case: the fit accepts the log, and every parameter it
+calls determined lies within 3 of its reported standard uncertainties of the true value. Where the case
+meets the issue's whole bar with room to spare (the replay within 2 encoder steps, Beq and the force gain
+within 5 %, each determined friction value within 10 %), the bar is asserted too, whether or not the bench
+judges the case (the bench's replay of the true values restarts the closed loop from smoothed speeds, which
+puts it at 2.6 steps; the fit's own restarts give 0.7).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parent.parent / "bench" / "fit_corpus.py"
+
+#: The cases, and whether the issue's whole bar is asserted on them (measured here: see the note at each). The largest
+#: z (error / reported sigma) of a determined parameter was 1.45 (B of the first case); on the triangle of the heavy-drag
+#: rig with 10 mV (not here) B's was 2.77, too close to 3 for a test.
+CASES = {
+    "calibrate ramp | heavy drag, weak drive | 0 mV": True,  # replay 1.27 steps, errors <= 0.7 %, all but v1 determined
+    "closed loop | unseen | 0 mV": True,  # replay 0.74 steps, errors <= 0.8 %, all determined
+    "calibrate ramp | light drag, strong drive | 10 mV": False,  # the true values replay at 2.3 steps: not judged by the bar
+    "random steps | unseen | 10 mV": False,  # the true values replay at 4.7 steps: not judged by the bar
+}
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("fit_corpus", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_corpus_case_is_accepted_and_honest(name):
+    from pendulab.calibration.synthetic import corpus, held_out
+
+    cases = corpus()
+    case = next(c for c in cases if c.name == name)
+    assert name not in held_out(cases)  # the held-out third is looked at only at the end
+    bench = _bench()
+    row = bench.run_case(case)
+    print("\n" + bench.line(row))
+    assert row["accepted"], row.get("refused", row)
+    for parameter, status in row["status"].items():
+        if status == "determined":
+            assert row["z"][parameter] <= 3.0, (parameter, row["errors"][parameter], row["z"][parameter])
+    if CASES[name]:  # the bar's other points, with room (measured: see CASES)
+        e, s = row["errors"], row["status"]
+        assert row["steps"] <= 2.0 and abs(e["Beq"]) <= 0.05 and abs(e["force_gain"]) <= 0.05, bench.line(row)
+        assert all(abs(e[n]) <= 0.10 for n in ("F1", "v1", "F2", "v2", "B") if s[n] == "determined"), bench.line(row)
+        assert {"Beq", "force_gain", "F1", "B"} <= {n for n in s if s[n] == "determined"}, bench.line(row)
+    print("z of the determined parameters:", {n: round(z, 2) for n, z in row["z"].items() if row["status"][n] == "determined"})
