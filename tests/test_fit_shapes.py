@@ -103,10 +103,14 @@ def test_replay_restarts_at_rests_so_the_true_values_replay_a_log_to_the_noise()
 
 
 def test_a_replay_with_wrong_values_is_rejected():
+    from pendulab.calibration.fit import FORWARD_LIMIT_STEPS
+
     log = synthetic_log("chirp", duration=10.0, voltage_noise=0.0)
-    good = fit_parameters([log], PlantParameters.preset("none"), max_iter=30)
-    assert good.forward_ok
+    limit = FORWARD_LIMIT_STEPS * TRUE.q_x  # the check a fit's answer must pass (FitResult.forward_limit)
+    x0 = np.array([log.x[0], 0, 0, 0])
+    x = replay([TRUE], log.V[:-1], log.t[:-1], x0)[0, :, 0]
+    assert math.sqrt(np.mean((x - log.x[1:]) ** 2)) < 0.25 * limit  # the true values pass it by far
     # The same check on values 16 % off (as the report): far above the encoder step.
     wrong = TRUE.with_values(Beq=TRUE.Beq * 0.84, force_gain=TRUE.force_gain * 0.84)
-    x = replay([wrong], log.V[:-1], log.t[:-1], np.array([log.x[0], 0, 0, 0]))[0, :, 0]
-    assert math.sqrt(np.mean((x - log.x[1:]) ** 2)) > good.forward_limit
+    x = replay([wrong], log.V[:-1], log.t[:-1], x0)[0, :, 0]
+    assert math.sqrt(np.mean((x - log.x[1:]) ** 2)) > limit
