@@ -31,8 +31,9 @@ def relative_errors(result, true: PlantParameters) -> dict[str, float]:
 
 
 #: (shape, noise on the logged voltage (V), the replay's RMS asserted, in encoder steps). The issue's bar
-#: is two steps; measured here: 1.0, 1.9 and 1.8 (a little margin for another machine's compiler).
-OPEN_LOOP = [("random steps", 0.0, 2.0), ("chirp", 0.0, 2.5), ("random steps", 0.01, 2.5)]
+#: is two steps; measured here: 1.0 and 1.9 (a little margin for another machine's compiler). Random steps
+#: with 10 mV of voltage noise on this rig are test_fit_corpus.py's "random steps | unseen | 10 mV".
+OPEN_LOOP = [("random steps", 0.0, 2.0), ("chirp", 0.0, 2.5)]
 
 
 @pytest.fixture(scope="module", params=OPEN_LOOP, ids=lambda case: f"{case[0]}, {case[1] * 1e3:.0f} mV")
