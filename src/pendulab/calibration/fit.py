@@ -570,8 +570,8 @@ def fit_parameters(
     step = float(params0.q_x)
     n_samples = sum(len(log) for log in logs)
 
-    def build_smoothed(width_scale: float) -> tuple[Callable[[np.ndarray], dict[str, Any]], np.ndarray, np.ndarray]:
-        """The smoothed problem with the law's switch widths times ``width_scale``: its solve, and the bounds."""
+    def build_smoothed(width_scale: float) -> Callable[[np.ndarray], dict[str, Any]]:
+        """The smoothed problem with the law's switch widths times ``width_scale`` (logs with the pendulum): its solve."""
         nonlocal prebuild
         t_prepare = time.perf_counter()
         functions: dict[tuple[int, int], IntervalFunctions] = {}
@@ -666,24 +666,67 @@ def fit_parameters(
                 "n_intervals": n_intervals, "start": np.asarray(theta_start, dtype=float),
             }
 
-        return smoothed_fit, lbx, ubx
+        return smoothed_fit
 
-    smoothed_fit, lbx, ubx = build_smoothed(1.0)
-    lower, upper = lbx[: len(names)], ubx[: len(names)]
+    lower = np.array([_LOWER[n] for n in names]) / scales
+    upper = np.array([_UPPER[n] for n in names]) / scales
     prior = (theta0, regularization) if regularization > 0 else None
     space = _polish.Space(params0, names, scales, lower, upper, prior)
+
+    def pieces_of(replays: list[_polish.Anchors], whole: list[_LogEstimate]) -> list[_polish.Anchors]:
+        """The logs' anchors cut to the pieces (long logs are searched on pieces, each from its state estimate)."""
+        if all(piece is whole[j].log for piece, j, _ in pieces):
+            return replays
+        return [
+            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
+            for piece, j, first in pieces
+        ]
+
+    def observed_fit() -> dict[str, Any]:
+        """The cart alone: the observer search (:mod:`pendulab.calibration._observer`) from the start, the lab's
+        defaults and the logs' own estimate; the replay's polish goes on from its answer."""
+        from pendulab.calibration import _observer
+
+        nonlocal prebuild
+        whole = []
+        for log in logs:
+            M = samples_per_interval(log)
+            used = ((len(log) - 1) // M) * M + 1
+            sigma = np.array([_noise_level(log.x[:used])])
+            whole.append(_LogEstimate(log, used, M, _initial_states(log, False)[:used:M].T.copy(), np.full(used, np.nan), sigma))
+        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, False) for e in whole]
+        searched = pieces_of(replays, whole)
+        if any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
+            searched = [_polish.denoised(a) for a in searched]  # the observer follows the drive the motor got
+        starts = [theta0]
+        if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
+            starts.append(theta_default)
+        if start_from_logs:
+            starts.append(space.project(np.array([getattr(_start_from_logs(logs, params0, names, progress), n) for n in names]) / scales))
+        if prebuild is not None:
+            prebuild.wait()
+            prebuild = None
+        found = _observer.search(searched, space, starts)
+        n_errors = sum(a.n for a in searched)
+        rms_observed = math.sqrt(found.cost / n_errors) * float(np.mean([a.sigma[0] for a in searched]))
+        progress(
+            f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
+            f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
+        )
+        omega = _observer.OMEGAS[-1]
+        for e, a in zip(whole, replays):
+            y = a.measured[:, 0]
+            predicted = _replay.observe(space.vectors(found.theta[None]), a.V, a.t, y, a.x0, _observer.observer_gain(omega, e.log.period), free=names)[0]
+            e.fitted[:] = np.r_[a.x0[0], predicted]
+        stats = {"return_status": "observer search", "iter_count": found.iterations, "success": True}
+        return {"w": found.theta, "stats": stats, "rms": rms_observed, "whole": whole, "replays": replays, "n_intervals": 0, "start": theta0}
 
     def polished_fit(candidate: dict[str, Any]) -> dict[str, Any]:
         """The smoothed answer polished on the replay; its replay RMS over the whole logs."""
         whole, replays = candidate["whole"], candidate["replays"]
         # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
         # estimate there; the check replays everything.
-        searched = replays
-        if any(piece is not whole[j].log for piece, j, _ in pieces):
-            searched = [
-                replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
-                for piece, j, first in pieces
-            ]
+        searched = pieces_of(replays, whole)
         # The polish starts from the smoothed answer, or from where the smoothed fit started if that
         # replays the logs better (a start from a ramp test's extraction can be nearer than the smoothed
         # answer, whose smoothing biases it).
@@ -738,28 +781,25 @@ def fit_parameters(
     # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
     # with them where the narrow ones fail); then the lab's defaults; then the logs' own estimate of the
     # drive, the drag and F1 (cart alone). A try's answer wins only if it replays clearly better.
-    best = polished_fit(smoothed_fit(theta0))
     defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     theta_default = np.array([getattr(defaults, n) for n in names]) / scales
-
-    def from_estimate() -> dict[str, Any]:
-        estimate = _start_from_logs(logs, params0, names, progress)
-        return smoothed_fit(np.array([getattr(estimate, n) for n in names]) / scales)
-
-    tries: list[tuple[float, str, Callable[[], dict[str, Any]]]] = [
-        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: build_smoothed(WIDE_SWITCHES)[0](theta0)),
-    ]
-    if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
-        tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed_fit(theta_default)))
-    if start_from_logs and not with_pendulum:
-        tries.append((FORWARD_LIMIT_STEPS, "from the logs' own estimate", from_estimate))
-    for above, label, solve in tries:
-        if best["polished_rms"] <= above * max(step, 1e-6):
-            continue
-        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again {label}")
-        other = polished_fit(solve())
-        if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
-            best = other
+    if not with_pendulum:
+        best = polished_fit(observed_fit())
+    else:
+        smoothed_fit = build_smoothed(1.0)
+        best = polished_fit(smoothed_fit(theta0))
+        tries: list[tuple[float, str, Callable[[], dict[str, Any]]]] = [
+            (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: build_smoothed(WIDE_SWITCHES)(theta0)),
+        ]
+        if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
+            tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed_fit(theta_default)))
+        for above, label, solve in tries:
+            if best["polished_rms"] <= above * max(step, 1e-6):
+                continue
+            progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again {label}")
+            other = polished_fit(solve())
+            if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
+                best = other
     stats, rms = best["stats"], best["rms"]
     whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
     theta_opt = polished.theta
