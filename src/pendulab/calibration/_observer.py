@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pendulab.calibration._polish import Anchors, Space
+from pendulab.calibration._polish import Anchors, Space, scan_directions
 from pendulab.calibration._replay import observe
 
 #: Observer bandwidths (rad/s), searched in turn: a wide basin first, then nearer the replay.
@@ -53,6 +53,7 @@ class Observed:
     cost: float
     iterations: int
     runs: int
+    others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the replay, not this cost, chooses among them)
 
 
 def observer_gain(omega: float, period: float, zeta: float = ZETA) -> np.ndarray:
@@ -95,7 +96,8 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
         moves = DIFFERENCE * np.eye(n)
         R = prediction_errors(logs, space, to_theta(np.vstack([z + moves, z - moves])), omega)
         J = (R[:n] - R[n:]).T / (2 * DIFFERENCE)
-        A, g = J.T @ J, J.T @ r
+        # einsum, not BLAS: the same sums in the same order on any machine and thread count.
+        A, g = np.einsum("ki,kj->ij", J, J), np.einsum("ki,k->i", J, r)
         scale = np.diag(A) + 1e-12
         trials = np.array([np.clip(z - np.linalg.solve(A + d * np.diag(scale), g), lower, upper) for d in damping * LADDER])
         R = prediction_errors(logs, space, to_theta(trials), omega)
@@ -111,7 +113,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
     return Observed(to_theta(z)[0], cost, it, runs)
 
 
-def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: tuple[float, ...] = OMEGAS) -> Observed:
+def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: tuple[float, ...] | None = None, seed: int = 19) -> Observed:
     """The observer search from ``starts`` (scaled values): see the module docstring.
 
     Examples
@@ -119,10 +121,20 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: 
     >>> # skipped: compiles the observer (tests/test_fit_observer.py runs it)
     >>> answer = search([anchors], space, [theta0])       # doctest: +SKIP
     """
+    omegas = omegas or OMEGAS
     tried = [_levenberg_marquardt(logs, space, s, omegas[0], START_ITERATIONS) for s in starts]
     best = min(tried, key=lambda o: o.cost)
     runs, iterations = sum(o.runs for o in tried), sum(o.iterations for o in tried)
-    for omega in omegas:
-        best = _levenberg_marquardt(logs, space, best.theta, omega, MAX_ITERATIONS)
-        runs, iterations = runs + best.runs, iterations + best.iterations
-    return Observed(best.theta, best.cost, iterations, runs)
+    # Robust scans along the axes where slow logs hide other basins (the drag split between B and Beq, with
+    # the slip region's end speed; the common scale of the drive, forces and drags; each parameter over
+    # a factor 9): a local search from the best start can stay where B is folded into Beq, only 0.6 %
+    # worse at the widest bandwidth (a slow triangle wave); at the narrower one it is 8 % worse.
+    omega = omegas[-1]
+    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: _costs(logs, space, thetas, omega))
+    best = _levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
+    return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs, tuple(o.theta for o in tried))
+
+
+def _costs(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:
+    R = prediction_errors(logs, space, thetas, omega)
+    return np.einsum("ij,ij->i", R, R)
