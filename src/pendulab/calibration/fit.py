@@ -9,10 +9,19 @@ Method
 force is replaced by a smoothed stick-slip law (:func:`fit_model`; the switch widths scale with
 the thresholds so that a cart below ``F1`` really stays stuck).
 
-Three stages: a smoothed fit finds the basin, a polish on the true law's replay finds the answer,
-and a check replays the whole logs with it.
+Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a
+check replays the whole logs with it.
 
-*Stage 1, multiple shooting on the smoothed law.* At most :data:`STAGE_SECONDS` of the logs (for
+*Stage 1 for the cart alone, the observer search* (:mod:`pendulab.calibration._observer`). The
+replay is a needle as an objective (a breakaway a millisecond early shifts the rest of a stretch); the
+same compiled plant corrected towards the logged position after every sample (an observer) forgets
+such a shift, and its one-sample prediction errors fall to one minimum at the true values along each
+parameter. Levenberg-Marquardt on them from the start, the lab's defaults and the logs' own estimate,
+scans along the slow logs' traps, and Levenberg-Marquardt again; the replay chooses among the answers.
+If the polished answer replays the logs within :data:`OBSERVER_ENOUGH_STEPS` encoder steps it stands;
+otherwise the smoothed problem below is solved too (with its fallbacks) and the better replay wins.
+
+*Stage 1 with the pendulum (and the fallback), multiple shooting on the smoothed law.* At most :data:`STAGE_SECONDS` of the logs (for
 longer logs, the :data:`PIECE_SECONDS` windows where the cart stops and starts most) are cut into
 shooting intervals of ``interval`` seconds (10 ms). The state at the start of every interval is an
 unknown, initialized from the smoothed log; one interval integrates its logged samples with RK4
@@ -213,7 +222,11 @@ class FitResult:
             **({"determination_note": self.confidence} if self.confidence else {}),
             "allowed_range": {n: [finite(a), finite(b)] for n, (a, b) in self.allowed.items()},
             "kept_start_value": [n for n, s in self.determination.items() if s == "not identified"],
-            "method": "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law",
+            "method": (
+                "least-squares fit on an observer of the replay (Levenberg-Marquardt on one-sample prediction errors), polished on the replay under the true law"
+                if self.status == OBSERVER_STATUS else
+                "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law"
+            ),
             "uncertainty_method": self.uncertainty_method,
             "forward_simulation_restarts": self.restarts,
             "forward_simulation_voltage": "denoised (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
@@ -246,7 +259,7 @@ class FitResult:
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
             f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
-            f"{self.iterations} IPOPT iterations, {self.seconds:.2f} s ({self.status})"
+            f"{self.iterations} {'observer search' if self.status == OBSERVER_STATUS else 'IPOPT'} iterations, {self.seconds:.2f} s ({self.status})"
         )
         lines.append(
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
@@ -288,6 +301,8 @@ FALLBACK_GAIN = 0.8
 #: The observer's answer (cart alone) stands if it replays the logs within this many encoder steps;
 #: otherwise the smoothed problem is solved too, and the better replay wins.
 OBSERVER_ENOUGH_STEPS = 2.5
+#: The solver status of an answer of the observer search.
+OBSERVER_STATUS = "observer search converged"
 
 
 @lru_cache(maxsize=None)
@@ -722,7 +737,7 @@ def fit_parameters(
             y = a.measured[:, 0]
             predicted = _replay.observe(space.vectors(found.theta[None]), a.V, a.t, y, a.x0, _observer.observer_gain(omega, e.log.period), free=names)[0]
             e.fitted[:] = np.r_[a.x0[0], predicted]
-        stats = {"return_status": "observer search", "iter_count": found.iterations, "success": True}
+        stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
         return {"w": found.theta, "others": found.others, "stats": stats, "rms": rms_observed, "whole": whole, "replays": replays, "n_intervals": 0, "start": theta0}
 
     def polished_fit(candidate: dict[str, Any], scans: bool = True) -> dict[str, Any]:
