@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -374,8 +375,8 @@ def _logit_share(space: Space, theta: np.ndarray) -> float:
 
 
 def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans: tuple[float, ...] = (math.log(3.0), math.log(3.0) / 8),
-                    points: int = 16, rounds: int = 2) -> Polished:
-    """Robust 1-D scans of the replay cost along every direction of :func:`directions_of`, ``rounds`` times.
+                    points: int = 16, rounds: int = 2, cost_of: Callable[[np.ndarray], np.ndarray] | None = None) -> Polished:
+    """Robust 1-D scans of the replay cost (or of ``cost_of(thetas)``) along every direction of :func:`directions_of`, ``rounds`` times.
 
     Each scan (coarse, then fine around the best) is one batched replay of the current point and
     ``points`` offsets within ``span`` (the split four times wider, in logit units); the best is kept.
@@ -383,7 +384,8 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
     traps (``B`` folded into ``Beq``; every force and drag at a wrong common scale) lie along these axes.
     """
     theta = space.project(np.asarray(theta, dtype=float).copy())
-    cost = start = float(costs(logs, space, theta[None])[0])
+    evaluate = cost_of or (lambda thetas: costs(logs, space, thetas))
+    cost = start = float(evaluate(theta[None])[0])
     replays = 1
     names = space.names
     for _ in range(rounds):
@@ -405,7 +407,7 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                         grid[:, j] = v2 / space.scales[j]
                         extra += [space.project(th) for th in grid]
                     trials = np.vstack([trials, extra])
-                c = costs(logs, space, trials)
+                c = evaluate(trials)
                 replays += 1
                 k = int(np.argmin(c))
                 if c[k] < cost:
@@ -418,7 +420,7 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                 trials[:, i] *= np.repeat(f, f.size)
                 trials[:, j] *= np.tile(f, f.size)
                 trials = np.array([theta] + [space.project(th) for th in trials])
-                c = costs(logs, space, trials)
+                c = evaluate(trials)
                 replays += 1
                 k = int(np.argmin(c))
                 if c[k] < cost:

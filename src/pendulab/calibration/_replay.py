@@ -49,37 +49,50 @@ SET_COUNTS = (1, 16, 32)
 
 
 @lru_cache(maxsize=None)
-def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], compile: bool) -> ca.Function:
-    """``F(s0[4 x m], V[1 x C], t[1 x C], restart[1 x C], s_restart[4 x C], theta[n_free x m], h) -> states[4 x C*m]``.
+def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], compile: bool, observer: bool = False) -> ca.Function:
+    """One chunk of :data:`CHUNK` samples for ``n_sets`` parameter sets, compiled to C where it can be.
+
+    The replay: ``F(s0[4 x m], V[1 x C], t[1 x C], restart[1 x C], s_restart[4 x C], theta[n_free x m], h)
+    -> states[4 x C*m]``. The observer (``observer=True``, see :func:`observe`): ``F(s0[4 x m], V, t,
+    y[1 x C], gain[4], theta, h) -> (s_end[4 x m], predicted[1 x C*m])``.
 
     Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are inputs; the others are
     compiled in as the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
     """
     step = step_function(False, n_sub).expand()
-    s, V, t, r, sr = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("r"), ca.SX.sym("sr", 4)
-    theta, h = ca.SX.sym("theta", len(free)), ca.SX.sym("h")
+    s, V, t, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
+    theta = ca.SX.sym("theta", len(free))
     entries = [ca.SX(v) for v in fixed]
     for j, i in enumerate(free):
         entries[i] = theta[j]
-    start = ca.if_else(r > 0.5, sr, s)
-    one = ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(start, V, ca.vertcat(*entries), t, h)])
-    accum = one.mapaccum("replay_chunk", CHUNK)
+    p = ca.vertcat(*entries)
     # MX, so that the chunk stays a loop over the one step in the generated C instead of being unrolled.
-    s0, Vc, tc, rc, src = ca.MX.sym("s0", 4), ca.MX.sym("V", 1, CHUNK), ca.MX.sym("t", 1, CHUNK), ca.MX.sym("r", 1, CHUNK), ca.MX.sym("sr", 4, CHUNK)
-    thc, hc = ca.MX.sym("theta", len(free)), ca.MX.sym("h")
-    states = accum(s0, Vc, tc, rc, src, ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
-    chunk = ca.Function("replay_chunk1", [s0, Vc, tc, rc, src, thc, hc], [states])
-    tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed)).encode()).hexdigest()[:10]
-    name = f"pendulab_replay_{tag}"
+    s0, Vc, tc, thc, hc = ca.MX.sym("s0", 4), ca.MX.sym("V", 1, CHUNK), ca.MX.sym("t", 1, CHUNK), ca.MX.sym("theta", len(free)), ca.MX.sym("h")
+    if observer:
+        y, gain = ca.SX.sym("y"), ca.SX.sym("gain", 4)
+        predicted = step(s, V, p, t, h)
+        one = ca.Function("observe_step", [s, V, t, y, gain, theta, h], [predicted + gain * (y - predicted[0]), predicted[0]])
+        yc, gc = ca.MX.sym("y", 1, CHUNK), ca.MX.sym("gain", 4)
+        states, positions = one.mapaccum("observe_chunk", CHUNK, [0], [0])(s0, Vc, tc, yc, ca.repmat(gc, 1, CHUNK), ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
+        chunk = ca.Function("observe_chunk1", [s0, Vc, tc, yc, gc, thc, hc], [states[:, -1], positions])
+    else:
+        r, sr = ca.SX.sym("r"), ca.SX.sym("sr", 4)
+        one = ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
+        rc, src = ca.MX.sym("r", 1, CHUNK), ca.MX.sym("sr", 4, CHUNK)
+        states = one.mapaccum("replay_chunk", CHUNK)(s0, Vc, tc, rc, src, ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
+        chunk = ca.Function("replay_chunk1", [s0, Vc, tc, rc, src, thc, hc], [states])
+    tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed) + (("observer",) if observer else ())).encode()).hexdigest()[:10]
+    name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
+    shared = [1, 2, 3, 4, 6]  # everything but the state and the parameters is the same for every set
     if compile and n_sets > 1:
         # The parameter sets in parallel on the machine's cores (OpenMP in the generated C). CasADi's own
         # build has no OpenMP and warns about its evaluator, which is not used here: the warning is dropped.
         with contextlib.redirect_stderr(io.StringIO()):
-            parallel = chunk.map(name, "openmp", n_sets, [1, 2, 3, 4, 6], [])
+            parallel = chunk.map(name, "openmp", n_sets, shared, [])
         library, _ = _compile([parallel], name, optimize="-O2", flags=("-fopenmp", *EXACT_MATH))
         if library:
             return ca.external(name, library)
-    f = chunk.map(name, "serial", n_sets, [1, 2, 3, 4, 6], [])
+    f = chunk.map(name, "serial", n_sets, shared, [])
     if compile:
         library, _ = _compile([f], name, optimize="-O2", flags=EXACT_MATH)
         if library:
@@ -101,6 +114,8 @@ def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[st
     for period in sorted(set(periods)):
         for m in SET_COUNTS:
             _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True)
+            if m > 1 and params.Mp == 0:  # the cart alone is searched on the observer (pendulab.calibration._observer)
+                _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True, True)
 
 
 def prepare_in_background(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> subprocess.Popen | None:
@@ -208,6 +223,75 @@ def replay(
         out[:, sl, :] = states
         state[:] = states[:, -1, :].ravel()
     return out[:, :n, :]
+
+
+def observe(
+    params: np.ndarray,
+    V: np.ndarray,
+    t: np.ndarray,
+    y: np.ndarray,
+    x0: np.ndarray,
+    gain: np.ndarray,
+    *,
+    free: Sequence[str] | None = None,
+    max_substep: float = MAX_SUBSTEP,
+    compile: bool = True,
+) -> np.ndarray:
+    """Positions predicted one sample ahead by an observer of the plant, ``(m, n)``.
+
+    The replay of :func:`replay`, corrected after each sample towards the logged position ``y[k]``:
+    ``state <- predicted + gain * (y[k] - predicted position)``. A breakaway a millisecond early no
+    longer shifts the rest of the log; each prediction shows only what the model gets wrong within about
+    one observer time constant. ``gain = 0`` is the replay itself. Arguments as :func:`replay`, with
+    ``params`` an array ``(m, n_params)``.
+
+    Examples
+    --------
+    >>> p = np.asarray(PlantParameters.preset("none").as_vector())[None]
+    >>> t = np.arange(1000) * 1e-3
+    >>> V = np.full(1000, 3.0)
+    >>> x = replay(p, V, t, np.zeros(4))[0, :, 0]
+    >>> bool(np.array_equal(observe(p, V, t, x, np.zeros(4), np.zeros(4))[0], x))
+    True
+    """
+    vectors = np.atleast_2d(np.asarray(params, dtype=float))
+    m, n = vectors.shape[0], len(V)
+    width = next((w for w in SET_COUNTS[1:] if w >= m), SET_COUNTS[-1])
+    if m > width:
+        return np.concatenate([observe(vectors[i : i + width], V, t, y, x0, gain, free=free, max_substep=max_substep, compile=compile)
+                               for i in range(0, m, width)])
+    if m < width:
+        return observe(np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))]), V, t, y, x0, gain, free=free, max_substep=max_substep, compile=compile)[:m]
+    period = float(t[1] - t[0]) if n > 1 else 1e-3
+    n_sub = substeps(period, max_substep)
+    free_idx, fixed = _split(vectors[0], free)
+    f = _chunk_function(n_sub, m, free_idx, fixed, bool(compile), True)
+    n_chunks = -(-n // CHUNK)
+    size = n_chunks * CHUNK
+    Vp, yp = np.zeros(size), np.zeros(size)
+    Vp[:n], yp[:n] = V, y
+    tp = t[0] + period * np.arange(size)
+    tp[:n] = t
+    # In place, as in replay(): column-major (4 x m) is (m, 4) here; the positions (1 x CHUNK*m) are (m, CHUNK).
+    state = np.tile(np.asarray(x0, dtype=float), m)
+    V_in, t_in, y_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(CHUNK)
+    g = np.asarray(gain, dtype=float).copy()
+    P = np.ascontiguousarray(vectors[:, free_idx]).ravel()
+    h = np.array([period / n_sub])
+    end, predicted = np.empty(4 * m), np.empty(CHUNK * m)
+    buffer, evaluate = f.buffer()
+    for i, a in enumerate((state, V_in, t_in, y_in, g, P, h)):
+        buffer.set_arg(i, a.data)
+    buffer.set_res(0, end.data)
+    buffer.set_res(1, predicted.data)
+    out = np.empty((m, size))
+    for c in range(n_chunks):
+        sl = slice(c * CHUNK, (c + 1) * CHUNK)
+        V_in[:], t_in[:], y_in[:] = Vp[sl], tp[sl], yp[sl]
+        evaluate()
+        out[:, sl] = predicted.reshape(m, CHUNK)
+        state[:] = end
+    return out[:, :n]
 
 
 if __name__ == "__main__":  # prepare_in_background's worker

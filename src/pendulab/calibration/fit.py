@@ -9,10 +9,19 @@ Method
 force is replaced by a smoothed stick-slip law (:func:`fit_model`; the switch widths scale with
 the thresholds so that a cart below ``F1`` really stays stuck).
 
-Three stages: a smoothed fit finds the basin, a polish on the true law's replay finds the answer,
-and a check replays the whole logs with it.
+Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a
+check replays the whole logs with it.
 
-*Stage 1, multiple shooting on the smoothed law.* At most :data:`STAGE_SECONDS` of the logs (for
+*Stage 1 for the cart alone, the observer search* (:mod:`pendulab.calibration._observer`). The
+replay is a needle as an objective (a breakaway a millisecond early shifts the rest of a stretch); the
+same compiled plant corrected towards the logged position after every sample (an observer) forgets
+such a shift, and its one-sample prediction errors fall to one minimum at the true values along each
+parameter. Levenberg-Marquardt on them from the start, the lab's defaults and the logs' own estimate,
+scans along the slow logs' traps, and Levenberg-Marquardt again; the replay chooses among the answers.
+If the polished answer replays the logs within :data:`OBSERVER_ENOUGH_STEPS` encoder steps it stands;
+otherwise the smoothed problem below is solved too (with its fallbacks) and the better replay wins.
+
+*Stage 1 with the pendulum (and the fallback), multiple shooting on the smoothed law.* At most :data:`STAGE_SECONDS` of the logs (for
 longer logs, the :data:`PIECE_SECONDS` windows where the cart stops and starts most) are cut into
 shooting intervals of ``interval`` seconds (10 ms). The state at the start of every interval is an
 unknown, initialized from the smoothed log; one interval integrates its logged samples with RK4
@@ -213,7 +222,11 @@ class FitResult:
             **({"determination_note": self.confidence} if self.confidence else {}),
             "allowed_range": {n: [finite(a), finite(b)] for n, (a, b) in self.allowed.items()},
             "kept_start_value": [n for n, s in self.determination.items() if s == "not identified"],
-            "method": "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law",
+            "method": (
+                "least-squares fit on an observer of the replay (Levenberg-Marquardt on one-sample prediction errors), polished on the replay under the true law"
+                if self.status == OBSERVER_STATUS else
+                "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law"
+            ),
             "uncertainty_method": self.uncertainty_method,
             "forward_simulation_restarts": self.restarts,
             "forward_simulation_voltage": "denoised (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
@@ -246,7 +259,7 @@ class FitResult:
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
             f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
-            f"{self.iterations} IPOPT iterations, {self.seconds:.2f} s ({self.status})"
+            f"{self.iterations} {'observer search' if self.status == OBSERVER_STATUS else 'IPOPT'} iterations, {self.seconds:.2f} s ({self.status})"
         )
         lines.append(
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
@@ -285,6 +298,11 @@ WIDE_ABOVE_STEPS = 4.0
 #: two answers that replay about equally well say the logs cannot choose, and the first one started
 #: nearer (on a ramp log whose first answer missed by 202 um, the smoother law's 195 um had F2 = F1).
 FALLBACK_GAIN = 0.8
+#: The observer's answer (cart alone) stands if it replays the logs within this many encoder steps;
+#: otherwise the smoothed problem is solved too, and the better replay wins.
+OBSERVER_ENOUGH_STEPS = 2.5
+#: The solver status of an answer of the observer search.
+OBSERVER_STATUS = "observer search converged"
 
 
 @lru_cache(maxsize=None)
@@ -570,8 +588,8 @@ def fit_parameters(
     step = float(params0.q_x)
     n_samples = sum(len(log) for log in logs)
 
-    def build_smoothed(width_scale: float) -> tuple[Callable[[np.ndarray], dict[str, Any]], np.ndarray, np.ndarray]:
-        """The smoothed problem with the law's switch widths times ``width_scale``: its solve, and the bounds."""
+    def build_smoothed(width_scale: float) -> Callable[[np.ndarray], dict[str, Any]]:
+        """The smoothed problem with the law's switch widths times ``width_scale`` (logs with the pendulum): its solve."""
         nonlocal prebuild
         t_prepare = time.perf_counter()
         functions: dict[tuple[int, int], IntervalFunctions] = {}
@@ -666,31 +684,87 @@ def fit_parameters(
                 "n_intervals": n_intervals, "start": np.asarray(theta_start, dtype=float),
             }
 
-        return smoothed_fit, lbx, ubx
+        return smoothed_fit
 
-    smoothed_fit, lbx, ubx = build_smoothed(1.0)
-    lower, upper = lbx[: len(names)], ubx[: len(names)]
+    lower = np.array([_LOWER[n] for n in names]) / scales
+    upper = np.array([_UPPER[n] for n in names]) / scales
     prior = (theta0, regularization) if regularization > 0 else None
     space = _polish.Space(params0, names, scales, lower, upper, prior)
 
-    def polished_fit(candidate: dict[str, Any]) -> dict[str, Any]:
+    def pieces_of(replays: list[_polish.Anchors], whole: list[_LogEstimate]) -> list[_polish.Anchors]:
+        """The logs' anchors cut to the pieces (long logs are searched on pieces, each from its state estimate)."""
+        if all(piece is whole[j].log for piece, j, _ in pieces):
+            return replays
+        return [
+            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
+            for piece, j, first in pieces
+        ]
+
+    def observed_fit() -> dict[str, Any]:
+        """The cart alone: the observer search (:mod:`pendulab.calibration._observer`) from the start, the lab's
+        defaults and the logs' own estimate; the replay's polish goes on from its answer."""
+        from pendulab.calibration import _observer
+
+        nonlocal prebuild
+        whole = []
+        for log in logs:
+            M = samples_per_interval(log)
+            used = ((len(log) - 1) // M) * M + 1
+            sigma = np.array([_noise_level(log.x[:used])])
+            whole.append(_LogEstimate(log, used, M, _initial_states(log, False)[:used:M].T.copy(), np.full(used, np.nan), sigma))
+        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, False) for e in whole]
+        searched = pieces_of(replays, whole)
+        if any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
+            searched = [_polish.denoised(a) for a in searched]  # the observer follows the drive the motor got
+        starts = [theta0]
+        if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
+            starts.append(theta_default)
+        if start_from_logs:
+            estimate = _start_from_logs(logs, params0, names, progress)
+            starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / scales))
+        if prebuild is not None:
+            prebuild.wait()
+            prebuild = None
+        found = _observer.search(searched, space, starts)
+        n_errors = sum(a.n for a in searched)
+        rms_observed = math.sqrt(found.cost / n_errors) * float(np.mean([a.sigma[0] for a in searched]))
+        progress(
+            f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
+            f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
+        )
+        omega = _observer.OMEGAS[-1]
+        for e, a in zip(whole, replays):
+            y = a.measured[:, 0]
+            predicted = _replay.observe(space.vectors(found.theta[None]), a.V, a.t, y, a.x0, _observer.observer_gain(omega, e.log.period), free=names)[0]
+            e.fitted[:] = np.r_[a.x0[0], predicted]
+        stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
+        return {"w": found.theta, "others": found.others, "stats": stats, "rms": rms_observed, "whole": whole, "replays": replays, "n_intervals": 0, "start": theta0}
+
+    def polished_fit(candidate: dict[str, Any], scans: bool = True) -> dict[str, Any]:
         """The smoothed answer polished on the replay; its replay RMS over the whole logs."""
         whole, replays = candidate["whole"], candidate["replays"]
         # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
         # estimate there; the check replays everything.
-        searched = replays
-        if any(piece is not whole[j].log for piece, j, _ in pieces):
-            searched = [
-                replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
-                for piece, j, first in pieces
-            ]
+        searched = pieces_of(replays, whole)
         # The polish starts from the smoothed answer, or from where the smoothed fit started if that
         # replays the logs better (a start from a ramp test's extraction can be nearer than the smoothed
         # answer, whose smoothing biases it).
         first = candidate["w"][: len(names)]
-        starts = np.array([first, space.project(candidate["start"].copy())])
-        R = np.nan_to_num(space.residuals(searched, starts), nan=1e6)
-        first = starts[int(np.argmin(np.einsum("ij,ij->i", R, R)))]
+        # The observer's prediction errors barely see the common scale of a slow log (a weak model's
+        # predictions are as good: the observer corrects them): the replay chooses among the starts' answers.
+        starts = np.array([first, *candidate.get("others", ()), space.project(candidate["start"].copy())])
+        voltages = [searched]
+        if not with_pendulum and any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
+            # A logged voltage with sample noise the motor never saw (a measured, not a commanded,
+            # voltage) flips the stick-slip law's decisions near a threshold: a level 1 % below the
+            # breakaway force breaks away in the replay. Its denoised twin is tried too, and the better
+            # of the two (at the better start) is searched.
+            voltages.append([_polish.denoised(a) for a in searched])
+        costs = [_polish.costs(v, space, starts) for v in voltages]
+        which = int(np.argmin([float(np.min(c)) for c in costs]))
+        searched, first = voltages[which], starts[int(np.argmin(costs[which]))]
+        if which:
+            replays = [_polish.denoised(a) for a in replays]
         result = _polish.polish(searched, space, first, max_iter=polish_iter, work=polish_work)
         target = (REFINE_ABOVE_STEPS * step / searched[0].sigma[0]) ** 2 * sum(a.measured.size for a in searched)
         for _ in range(REFINE_ROUNDS):
@@ -701,18 +775,7 @@ def fit_parameters(
             if cost >= result.cost:
                 break
             result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=6)
-        if not with_pendulum and any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
-            # A logged voltage with sample noise the motor never saw (a measured, not a commanded,
-            # voltage) flips the stick-slip law's decisions near a threshold: a level 1 % below the
-            # breakaway force breaks away in the replay. Its median-filtered twin is tried at the answer,
-            # and kept (with a few more search steps) if the motion agrees with it better.
-            filtered = [_polish.denoised(a) for a in searched]
-            r_filtered = space.residuals(filtered, result.theta[None])[0]
-            if float(r_filtered @ r_filtered) < result.cost:
-                result = result.then(_polish.polish(filtered, space, result.theta, max_iter=polish_iter, scan=()), replays=1)
-                replays = filtered if searched is replays else [_polish.denoised(a) for a in replays]
-                searched = filtered
-        for _ in range(SCAN_CYCLES):
+        for _ in range(SCAN_CYCLES if scans else 0):
             if result.cost <= target:
                 break
             # Still more than a couple of encoder steps: scans along what slow logs confuse (the common
@@ -738,21 +801,117 @@ def fit_parameters(
     # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
     # with them where the narrow ones fail); then the lab's defaults; then the logs' own estimate of the
     # drive, the drag and F1 (cart alone). A try's answer wins only if it replays clearly better.
-    best = polished_fit(smoothed_fit(theta0))
+    def finish(best: dict[str, Any]) -> FitResult:
+        """The answer's profile, uncertainties and check: the fit's result."""
+        stats, rms = best["stats"], best["rms"]
+        whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
+        theta_opt = polished.theta
+        values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
+        params = params0.with_values(**values)
+
+        # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
+        # they do not identify keeps its start value (if the replay stays as good with it).
+        prof = _polish.profile(searched, space, theta_opt)
+        kept = [j for j, s_ in enumerate(prof.status) if s_ == _polish.NOT_IDENTIFIED]
+        if kept:
+            trial = theta_opt.copy()
+            trial[kept] = theta0[kept]
+            trial = space.project(trial)
+            r_trial = space.residuals(searched, trial[None])[0]
+            if float(r_trial @ r_trial) <= polished.cost + prof.threshold:
+                theta_opt = trial
+                values = {n: float(v * s_) for n, v, s_ in zip(names, theta_opt, scales)}
+                params = params0.with_values(**values)
+        if _polish.DETERMINED not in prof.status:
+            raise FitRejected(
+                "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
+                f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
+            )
+        uncertainty = prof.sigma.copy()
+        # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
+        # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
+        volt_noise = max(_polish.voltage_noise(log.V) for log in logs)
+        force_floor = volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum
+        if force_floor:
+            from pendulab.calibration.extract import motor_constants
+
+            K, _ = motor_constants(params.with_values(force_gain=1.0))
+            for j, n in enumerate(names):
+                if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
+                    uncertainty[j] = max(uncertainty[j], params.force_gain * K * volt_noise / scales[j])
+        uncertainty_method = (
+            "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
+            f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance and the cluster-robust "
+            "covariance (the stretches between restarts as clusters) of the determined ones"
+            + (f"; the forces at least the drive of the logged voltage's noise ({volt_noise * 1e3:.2g} mV)" if force_floor else "")
+        )
+
+        # The check: the whole logs replayed with the answer (restarted only where the state is known).
+        curves, forward_errors, regimes = [], [], []
+        vector = np.asarray(params.as_vector(), dtype=float)[None, :]
+        for e, a in zip(whole, replays):
+            states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
+            simulated = np.r_[a.x0[0], states[:, 0]]
+            regimes.append(slip_shares(params, a.V, states))
+            log, used = e.log, e.used
+            curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
+            forward_errors.append(simulated - log.x[:used])
+        forward = np.concatenate(forward_errors)
+        forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
+        forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
+        progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
+
+        status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, float(params0.q_x))
+        allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)}
+        status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
+        confidence = "; ".join(note for note in (confidence, regime_note) if note)
+        if confidence:
+            progress(confidence)
+        return FitResult(
+            names=names,
+            values=values,
+            initial={n: float(v) for n, v in zip(names, start_values)},
+            uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
+            uncertainty_method=uncertainty_method,
+            determination=dict(zip(names, status)),
+            confidence=confidence,
+            allowed=allowed,
+            restarts=sum(len(a.restarts) for a in replays),
+            voltage_filtered=any(a.denoised for a in replays),
+            residual_rms=rms,
+            params=params,
+            n_samples=n_samples,
+            n_intervals=best["n_intervals"],
+            iterations=int(stats.get("iter_count", -1)),
+            success=bool(stats.get("success", False)),
+            status=str(stats.get("return_status", "unknown")),
+            seconds=time.perf_counter() - t_start,
+            curves=tuple(curves),
+            forward_rms=forward_rms,
+            forward_max=forward_max,
+            encoder_step=float(params0.q_x),
+            travel=max(float(np.ptp(e.log.x[: e.used])) for e in whole),
+        )
+
+
     defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     theta_default = np.array([getattr(defaults, n) for n in names]) / scales
-
-    def from_estimate() -> dict[str, Any]:
-        estimate = _start_from_logs(logs, params0, names, progress)
-        return smoothed_fit(np.array([getattr(estimate, n) for n in names]) / scales)
-
+    best: dict[str, Any] | None = None
+    if not with_pendulum:
+        # The cart alone: the observer search first; its answer stands if the replay confirms it.
+        best = polished_fit(observed_fit(), scans=False)
+        if best["polished_rms"] <= OBSERVER_ENOUGH_STEPS * max(step, 1e-6):
+            return finish(best)
+        progress(f"the observer's answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving the smoothed problem")
+    smoothed_fit = build_smoothed(1.0)
+    other = polished_fit(smoothed_fit(theta0))
+    if best is None or other["polished_rms"] < best["polished_rms"]:
+        best = other
     tries: list[tuple[float, str, Callable[[], dict[str, Any]]]] = [
-        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: build_smoothed(WIDE_SWITCHES)[0](theta0)),
+        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: build_smoothed(WIDE_SWITCHES)(theta0)),
     ]
     if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
         tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed_fit(theta_default)))
-    if start_from_logs and not with_pendulum:
-        tries.append((FORWARD_LIMIT_STEPS, "from the logs' own estimate", from_estimate))
     for above, label, solve in tries:
         if best["polished_rms"] <= above * max(step, 1e-6):
             continue
@@ -760,96 +919,7 @@ def fit_parameters(
         other = polished_fit(solve())
         if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
             best = other
-    stats, rms = best["stats"], best["rms"]
-    whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
-    theta_opt = polished.theta
-    values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
-    params = params0.with_values(**values)
-
-    # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
-    # they do not identify keeps its start value (if the replay stays as good with it).
-    prof = _polish.profile(searched, space, theta_opt)
-    kept = [j for j, s_ in enumerate(prof.status) if s_ == _polish.NOT_IDENTIFIED]
-    if kept:
-        trial = theta_opt.copy()
-        trial[kept] = theta0[kept]
-        trial = space.project(trial)
-        r_trial = space.residuals(searched, trial[None])[0]
-        if float(r_trial @ r_trial) <= polished.cost + prof.threshold:
-            theta_opt = trial
-            values = {n: float(v * s_) for n, v, s_ in zip(names, theta_opt, scales)}
-            params = params0.with_values(**values)
-    if _polish.DETERMINED not in prof.status:
-        raise FitRejected(
-            "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
-            f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
-        )
-    uncertainty = prof.sigma.copy()
-    # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
-    # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
-    volt_noise = max(_polish.voltage_noise(log.V) for log in logs)
-    force_floor = volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum
-    if force_floor:
-        from pendulab.calibration.extract import motor_constants
-
-        K, _ = motor_constants(params.with_values(force_gain=1.0))
-        for j, n in enumerate(names):
-            if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
-                uncertainty[j] = max(uncertainty[j], params.force_gain * K * volt_noise / scales[j])
-    uncertainty_method = (
-        "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
-        f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance and the cluster-robust "
-        "covariance (the stretches between restarts as clusters) of the determined ones"
-        + (f"; the forces at least the drive of the logged voltage's noise ({volt_noise * 1e3:.2g} mV)" if force_floor else "")
-    )
-
-    # The check: the whole logs replayed with the answer (restarted only where the state is known).
-    curves, forward_errors, regimes = [], [], []
-    vector = np.asarray(params.as_vector(), dtype=float)[None, :]
-    for e, a in zip(whole, replays):
-        states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
-        simulated = np.r_[a.x0[0], states[:, 0]]
-        regimes.append(slip_shares(params, a.V, states))
-        log, used = e.log, e.used
-        curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
-        forward_errors.append(simulated - log.x[:used])
-    forward = np.concatenate(forward_errors)
-    forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
-    forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
-    progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
-
-    status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, float(params0.q_x))
-    allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)}
-    status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
-    confidence = "; ".join(note for note in (confidence, regime_note) if note)
-    if confidence:
-        progress(confidence)
-    return FitResult(
-        names=names,
-        values=values,
-        initial={n: float(v) for n, v in zip(names, start_values)},
-        uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
-        uncertainty_method=uncertainty_method,
-        determination=dict(zip(names, status)),
-        confidence=confidence,
-        allowed=allowed,
-        restarts=sum(len(a.restarts) for a in replays),
-        voltage_filtered=any(a.denoised for a in replays),
-        residual_rms=rms,
-        params=params,
-        n_samples=n_samples,
-        n_intervals=best["n_intervals"],
-        iterations=int(stats.get("iter_count", -1)),
-        success=bool(stats.get("success", False)),
-        status=str(stats.get("return_status", "unknown")),
-        seconds=time.perf_counter() - t_start,
-        curves=tuple(curves),
-        forward_rms=forward_rms,
-        forward_max=forward_max,
-        encoder_step=float(params0.q_x),
-        travel=max(float(np.ptp(e.log.x[: e.used])) for e in whole),
-    )
-
+    return finish(best)
 
 def confidence_of(
     status: Sequence[str], sigma: np.ndarray, forward_rms: float, step: float
