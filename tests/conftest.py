@@ -16,6 +16,12 @@ import pytest
 
 ON_CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
 
+# Each test process (pytest-xdist runs one per core) runs the fit's compiled replays on one thread: two
+# processes with two OpenMP threads each would take the core that the real-time link's process needs
+# (a fit beside `calibrate --port` made the rig's answers late). libgomp reads this when it first loads.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
 
 def _fail_instead_of_skip(report) -> None:  # noqa: ANN001 - a pytest TestReport or CollectReport
     if ON_CI and report.skipped and not hasattr(report, "wasxfail") and sys.platform != "win32":
