@@ -225,6 +225,12 @@ def replay(
     return out[:, :n, :]
 
 
+def observer_compiled(params: PlantParameters, period: float, free: Sequence[str], max_substep: float = MAX_SUBSTEP) -> bool:
+    """Whether :func:`observe` runs as compiled C here (else in CasADi's virtual machine, many times slower)."""
+    free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
+    return _chunk_function(substeps(period, max_substep), SET_COUNTS[1], free_idx, fixed, True, True).class_name() == "External"
+
+
 def observe(
     params: np.ndarray,
     V: np.ndarray,
