@@ -113,7 +113,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
     return Observed(to_theta(z)[0], cost, it, runs)
 
 
-def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: tuple[float, ...] | None = None, seed: int = 19) -> Observed:
+def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: tuple[float, ...] | None = None) -> Observed:
     """The observer search from ``starts`` (scaled values): see the module docstring.
 
     Examples

@@ -705,7 +705,6 @@ def fit_parameters(
         defaults and the logs' own estimate; the replay's polish goes on from its answer."""
         from pendulab.calibration import _observer
 
-        nonlocal prebuild
         whole = []
         for log in logs:
             M = samples_per_interval(log)
@@ -722,10 +721,7 @@ def fit_parameters(
         if start_from_logs:
             estimate = _start_from_logs(logs, params0, names, progress)
             starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / scales))
-        if prebuild is not None:
-            prebuild.wait()
-            prebuild = None
-        found = _observer.search(searched, space, starts)
+        found = _observer.search(searched, space, starts)  # (the background build was waited for before the choice of search)
         n_errors = sum(a.n for a in searched)
         rms_observed = math.sqrt(found.cost / n_errors) * float(np.mean([a.sigma[0] for a in searched]))
         progress(
@@ -741,7 +737,7 @@ def fit_parameters(
         return {"w": found.theta, "others": found.others, "stats": stats, "rms": rms_observed, "whole": whole, "replays": replays, "n_intervals": 0, "start": theta0}
 
     def polished_fit(candidate: dict[str, Any], scans: bool = True) -> dict[str, Any]:
-        """The smoothed answer polished on the replay; its replay RMS over the whole logs."""
+        """A search's answer (smoothed or observer) polished on the replay; its replay RMS over the whole logs."""
         whole, replays = candidate["whole"], candidate["replays"]
         # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
         # estimate there; the check replays everything.
@@ -796,11 +792,6 @@ def fit_parameters(
         )
         return {**candidate, "replays": replays, "polished": result, "searched": searched, "polished_rms": rms_replay}
 
-    # More tries while the polished answer misses the logs (a local minimum of the smoothed problem), each
-    # above its own threshold (encoder steps): wider switches make a smoother problem with fewer wrong
-    # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
-    # with them where the narrow ones fail); then the lab's defaults; then the logs' own estimate of the
-    # drive, the drag and F1 (cart alone). A try's answer wins only if it replays clearly better.
     def finish(best: dict[str, Any]) -> FitResult:
         """The answer's profile, uncertainties and check: the fit's result."""
         stats, rms = best["stats"], best["rms"]
@@ -893,7 +884,6 @@ def fit_parameters(
             travel=max(float(np.ptp(e.log.x[: e.used])) for e in whole),
         )
 
-
     defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     theta_default = np.array([getattr(defaults, n) for n in names]) / scales
     best: dict[str, Any] | None = None
@@ -908,6 +898,11 @@ def fit_parameters(
         if best["polished_rms"] <= OBSERVER_ENOUGH_STEPS * max(step, 1e-6):
             return finish(best)
         progress(f"the observer's answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving the smoothed problem")
+    # More tries while the polished answer misses the logs (a local minimum of the smoothed problem), each
+    # above its own threshold (encoder steps): wider switches make a smoother problem with fewer wrong
+    # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
+    # with them where the narrow ones fail); then the lab's defaults (the logs' own estimate of the drive,
+    # the drag and F1 is a start of the observer search). A try's answer wins only if it replays clearly better.
     smoothed_fit = build_smoothed(1.0)
     other = polished_fit(smoothed_fit(theta0))
     if best is None or other["polished_rms"] < best["polished_rms"]:
