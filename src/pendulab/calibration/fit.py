@@ -301,6 +301,8 @@ FALLBACK_GAIN = 0.8
 #: The observer's answer (cart alone) stands if it replays the logs within this many encoder steps;
 #: otherwise the smoothed problem is solved too, and the better replay wins.
 OBSERVER_ENOUGH_STEPS = 2.5
+#: The bandwidth (rad/s) of the observer that chooses among the observer search's answers from its starts.
+CHOICE_OMEGA = 20.0
 #: The solver status of an answer of the observer search.
 OBSERVER_STATUS = "observer search converged"
 
@@ -545,7 +547,7 @@ def fit_parameters(
     >>> # skipped: a fit compiles its replay and takes tens of seconds (tests/test_fit*.py run it)
     >>> result = fit_parameters([read_log("ramp.csv")])       # doctest: +SKIP
     """
-    from pendulab.calibration import _polish, _replay
+    from pendulab.calibration import _observer, _polish, _replay
     from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
     from pendulab.native import VM_FALLBACK_NOTE, install_hint
 
@@ -703,7 +705,6 @@ def fit_parameters(
     def observed_fit() -> dict[str, Any]:
         """The cart alone: the observer search (:mod:`pendulab.calibration._observer`) from the start, the lab's
         defaults and the logs' own estimate; the replay's polish goes on from its answer."""
-        from pendulab.calibration import _observer
 
         whole = []
         for log in logs:
@@ -746,8 +747,8 @@ def fit_parameters(
         # replays the logs better (a start from a ramp test's extraction can be nearer than the smoothed
         # answer, whose smoothing biases it).
         first = candidate["w"][: len(names)]
-        # The observer's prediction errors barely see the common scale of a slow log (a weak model's
-        # predictions are as good: the observer corrects them): the replay chooses among the starts' answers.
+        # The search's observer barely sees the common scale of a slow log (a weak model's predictions are as
+        # good: the observer corrects them): the other starts' answers are candidates too (chosen below).
         starts = np.array([first, *candidate.get("others", ()), space.project(candidate["start"].copy())])
         voltages = [searched]
         if not with_pendulum and any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
@@ -759,6 +760,11 @@ def fit_parameters(
         costs = [_polish.costs(v, space, starts) for v in voltages]
         which = int(np.argmin([float(np.min(c)) for c in costs]))
         searched, first = voltages[which], starts[int(np.argmin(costs[which]))]
+        if "others" in candidate:
+            # Among the observer search's answers an observer of narrow bandwidth chooses: it sees the common scale
+            # as the replay does, without the replay's needle (on a sweep of the unseen rig the replay chose an answer
+            # that polished to 2.9 encoder steps; the observer at 20 rad/s chooses the search's own answer).
+            first = starts[int(np.argmin(_observer.costs(searched, space, starts, CHOICE_OMEGA)))]
         if which:
             replays = [_polish.denoised(a) for a in replays]
         result = _polish.polish(searched, space, first, max_iter=polish_iter, work=polish_work)
