@@ -404,7 +404,7 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                     j = names.index("v2")
                     extra = []
                     for v2 in SLIP_SPEEDS:
-                        grid = np.vstack([theta, trials])
+                        grid = trials.copy()
                         grid[:, j] = v2 / space.scales[j]
                         extra += [space.project(th) for th in grid]
                     trials = np.vstack([trials, extra])
