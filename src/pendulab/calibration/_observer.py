@@ -53,7 +53,7 @@ class Observed:
     cost: float
     iterations: int
     runs: int
-    others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the replay, not this cost, chooses among them)
+    others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the fit chooses among them on a narrower observer)
 
 
 def observer_gain(omega: float, period: float, zeta: float = ZETA) -> np.ndarray:

@@ -17,7 +17,8 @@ replay is a needle as an objective (a breakaway a millisecond early shifts the r
 same compiled plant corrected towards the logged position after every sample (an observer) forgets
 such a shift, and its one-sample prediction errors fall to one minimum at the true values along each
 parameter. Levenberg-Marquardt on them from the start, the lab's defaults and the logs' own estimate,
-scans along the slow logs' traps, and Levenberg-Marquardt again; the replay chooses among the answers.
+scans along the slow logs' traps, and Levenberg-Marquardt again; an observer of narrow bandwidth
+(:data:`CHOICE_OMEGA`, where the common scale shows) chooses among the starts' answers.
 If the polished answer replays the logs within :data:`OBSERVER_ENOUGH_STEPS` encoder steps it stands;
 otherwise the smoothed problem below is solved too (with its fallbacks) and the better replay wins.
 
