@@ -706,7 +706,6 @@ def fit_parameters(
     def observed_fit() -> dict[str, Any]:
         """The cart alone: the observer search (:mod:`pendulab.calibration._observer`) from the start, the lab's
         defaults and the logs' own estimate; the replay's polish goes on from its answer."""
-
         whole = []
         for log in logs:
             M = samples_per_interval(log)
