@@ -52,6 +52,11 @@ REALTIME_FILES = frozenset({
 })
 
 
+#: Test files that share the session's ``ramp_test_fit`` (a fit of about a minute): one process runs them all,
+#: so that the fit is made once.
+RAMP_FIT_FILES = frozenset({"test_fit.py", "test_fit_checks.py"})
+
+
 def pytest_collection_modifyitems(config, items):  # noqa: ANN001
     for item in items:
         if item.path.name in REALTIME_FILES:
@@ -61,14 +66,16 @@ def pytest_collection_modifyitems(config, items):  # noqa: ANN001
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):  # noqa: ANN001
     """pytest-xdist (``-n auto`` in pyproject.toml): a file's tests run in one process, which builds the file's
-    module fixtures once, and the real-time files all run in one process, one after the other, so that no two
-    real-time links share the machine. (Its own ``--dist loadgroup`` marks do not take with pytest 9.)"""
+    module fixtures once; the real-time files all run in one process, one after the other, so that no two
+    real-time links share the machine; the files that share the ramp test's fit run in one process. (Its own
+    ``--dist loadgroup`` marks do not take with pytest 9.)"""
     from xdist.scheduler import LoadScopeScheduling
 
     class ByFileRealTimeTogether(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             file = nodeid.split("::", 1)[0]
-            return "realtime" if Path(file).name in REALTIME_FILES else file
+            name = Path(file).name
+            return "realtime" if name in REALTIME_FILES else "ramp_test_fit" if name in RAMP_FIT_FILES else file
 
     return ByFileRealTimeTogether(config, log)
 

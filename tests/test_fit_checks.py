@@ -87,7 +87,8 @@ def test_forward_check_is_reported_stored_and_matches_an_independent_replay(ramp
 
 
 def test_a_fit_that_cannot_reproduce_the_log_exits_3_and_writes_no_calibration(capsys, ramp_log, tmp_path):
-    _, path = ramp_log
+    log, _ = ramp_log
+    path = write_log(log.between(0.0, 5.0), tmp_path / "ramp_5s.csv")  # its first ramps: a third of the fit's time
     out = tmp_path / "fit.json"
     # Only F1 free, Beq and the force gain held 17 % and 11 % off: no F1 can make up for them.
     status, text, err = run(capsys, "fit", str(path), "--fit", "F1", "--start", "defaults", "--out", str(out))

@@ -52,3 +52,20 @@ def test_scans_leave_the_basin_where_B_is_folded_into_Beq():
     assert value["B"] / (value["B"] + value["Beq"]) > 0.7  # the drag is mostly B again (true 0.91, measured 0.99)
     assert abs(value["force_gain"] / TRUE.force_gain - 1) < 0.1  # measured +2.2 %
     assert value["v2"] > 0.03  # the slip region is back (true 0.06)
+
+
+def test_scans_fill_the_compiled_batches_and_find_a_minimum_off_the_start():
+    # The compiled replays and observers run 1, 16 or 32 parameter sets at a time (others are padded): a
+    # scan runs only its moved points (the current one's cost is known), so every batch is a multiple of 16.
+    _, space = setup()
+    truth = np.array([getattr(TRUE, n) for n in DEFAULT_FIT]) / space.scales
+    sizes = []
+
+    def bowl(thetas: np.ndarray) -> np.ndarray:  # a cheap cost with its minimum at the truth, in log units
+        sizes.append(len(thetas))
+        return np.sum(np.log(np.maximum(thetas, 1e-12) / truth) ** 2, axis=1)
+
+    start = truth * np.array([1.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])  # F1 50 % high
+    found = _polish.scan_directions([], space, start, rounds=1, cost_of=bowl)
+    assert sizes[0] == 1 and all(s % 16 == 0 for s in sizes[1:]), sizes
+    assert found.cost < 0.02 * found.start_cost  # the F1 scan found the bowl's bottom (log 1.5 squared is 0.16)

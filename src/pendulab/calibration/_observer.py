@@ -53,7 +53,7 @@ class Observed:
     cost: float
     iterations: int
     runs: int
-    others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the replay, not this cost, chooses among them)
+    others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the fit chooses among them on a narrower observer)
 
 
 def observer_gain(omega: float, period: float, zeta: float = ZETA) -> np.ndarray:
@@ -130,11 +130,12 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: 
     # a factor 9): a local search from the best start can stay where B is folded into Beq, only 0.6 %
     # worse at the widest bandwidth (a slow triangle wave); at the narrower one it is 8 % worse.
     omega = omegas[-1]
-    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: _costs(logs, space, thetas, omega))
+    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: costs(logs, space, thetas, omega))
     best = _levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
     return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs, tuple(o.theta for o in tried))
 
 
-def _costs(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:
+def costs(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:
+    """The observer's cost (sum of squared weighted prediction errors and prior) of each row of ``thetas``."""
     R = prediction_errors(logs, space, thetas, omega)
     return np.einsum("ij,ij->i", R, R)

@@ -378,8 +378,8 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                     points: int = 16, rounds: int = 2, cost_of: Callable[[np.ndarray], np.ndarray] | None = None) -> Polished:
     """Robust 1-D scans of the replay cost (or of ``cost_of(thetas)``) along every direction of :func:`directions_of`, ``rounds`` times.
 
-    Each scan (coarse, then fine around the best) is one batched replay of the current point and
-    ``points`` offsets within ``span`` (the split four times wider, in logit units); the best is kept.
+    Each scan (coarse, then fine around the best) is one batched replay of ``points`` offsets from the
+    current point within ``span`` (the split four times wider, in logit units); the best is kept.
     A scan sees another basin along its axis, where a local search sees only the slope: the slow logs'
     traps (``B`` folded into ``Beq``; every force and drag at a wrong common scale) lie along these axes.
     """
@@ -392,10 +392,11 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
         for d in directions_of(names):
             for span in spans:
                 coarse = span == spans[0]
+                # Only the moved points are run (the current one's cost is known): 16 of them fill one compiled batch.
                 if d == "split" and coarse:  # every share of B in the drag, from 1 % to 99 %
-                    trials = np.array([theta] + [moved(space, theta, d, x - _logit_share(space, theta)) for x in np.linspace(-4.6, 4.6, points)])
+                    trials = np.array([moved(space, theta, d, x - _logit_share(space, theta)) for x in np.linspace(-4.6, 4.6, points)])
                 else:
-                    X = np.r_[0.0, np.linspace(-span, span, points)] * (4.0 if d == "split" else 1.0 if d == "scale" else 2.0)
+                    X = np.linspace(-span, span, points) * (4.0 if d == "split" else 1.0 if d == "scale" else 2.0)
                     trials = np.array([moved(space, theta, d, x) for x in X])
                 if d == "split" and "v2" in names and coarse:
                     # B acts only below v2: out of the trap "B = 0, Beq = the whole drag" the split
@@ -419,7 +420,7 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                 trials = np.tile(theta, (f.size**2, 1))
                 trials[:, i] *= np.repeat(f, f.size)
                 trials[:, j] *= np.tile(f, f.size)
-                trials = np.array([theta] + [space.project(th) for th in trials])
+                trials = np.array([space.project(th) for th in trials])
                 c = evaluate(trials)
                 replays += 1
                 k = int(np.argmin(c))
