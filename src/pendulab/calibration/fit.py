@@ -758,9 +758,12 @@ def fit_parameters(
             # breakaway force breaks away in the replay. Its denoised twin is tried too, and the better
             # of the two (at the better start) is searched.
             voltages.append([_polish.denoised(a) for a in searched])
-        costs = [_polish.costs(v, space, starts) for v in voltages]
-        which = int(np.argmin([float(np.min(c)) for c in costs]))
-        searched, first = voltages[which], starts[int(np.argmin(costs[which]))]
+        which = 0
+        if len(voltages) > 1 or "others" not in candidate:  # the observer's answers are chosen below, not by the replay
+            costs = [_polish.costs(v, space, starts) for v in voltages]
+            which = int(np.argmin([float(np.min(c)) for c in costs]))
+            first = starts[int(np.argmin(costs[which]))]
+        searched = voltages[which]
         if "others" in candidate:
             # Among the observer search's answers an observer of narrow bandwidth chooses: it sees the common scale
             # as the replay does, without the replay's needle (on a sweep of the unseen rig the replay chose an answer
