@@ -13,7 +13,8 @@ import scipy.io
 
 from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, an independent replay of the log
 from pendulab.calibration.files import load_calibration
-from pendulab.calibration.fit import fit_parameters, ramp_start
+from pendulab.calibration import fit as fit_module
+from pendulab.calibration.fit import DEFAULT_FIT, fit_parameters, ramp_start
 from pendulab.calibration.logs import RampLog, read_log, write_log
 from pendulab.calibration.synthetic import TEST_RIG
 from pendulab.cli.main import main
@@ -39,9 +40,12 @@ def ramp_log(ramp_test_fit):
 def folder_fit(ramp_test_fit, tmp_path_factory):
     """``pendulab fit`` of the same log in the old lab's folder layout: this file's one command-line fit.
 
-    Returns the folder, the printed text and the calibration file written (the exit status is asserted 0 here).
+    The command line is a thin layer over the Python API: its call of ``fit_parameters`` is recorded
+    and answered with the API's own fit of the CSV log (conftest, a minute of fitting not repeated; the
+    command line's real fit runs in test_calibration_cli and test_wheel). Returns the folder, the printed
+    text, the calibration file written (the exit status is asserted 0 here) and the recorded call.
     """
-    log = ramp_test_fit[0]
+    log, _, result = ramp_test_fit
     folder = tmp_path_factory.mktemp("old_lab") / "old"
     folder.mkdir()
     # The old lab's layout: one .mat per signal, [t, value]; the angle zeroed hanging (pi, no pendulum on).
@@ -49,10 +53,18 @@ def folder_fit(ramp_test_fit, tmp_path_factory):
     scipy.io.savemat(folder / "voltage.mat", {"Vm": np.column_stack([log.t, log.V])})
     scipy.io.savemat(folder / "angle.mat", {"theta": np.column_stack([log.t, np.full(log.t.size, math.pi)])})
     out, text, err = folder.parent / "fit.json", io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(text), contextlib.redirect_stderr(err):
+    calls = []
+
+    def recorded(logs, params0=None, **kwargs):
+        calls.append((list(logs), params0, kwargs))
+        return result
+
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(text), contextlib.redirect_stderr(err):
+        patch.setattr(fit_module, "fit_parameters", recorded)
         status = main(["fit", str(folder), "--out", str(out)])
     assert status == 0, err.getvalue()
-    return folder, text.getvalue(), out
+    assert len(calls) == 1
+    return folder, text.getvalue(), out, calls[0]
 
 
 def forward_rms(params: PlantParameters, log: RampLog) -> float:
@@ -63,7 +75,7 @@ def forward_rms(params: PlantParameters, log: RampLog) -> float:
 
 def test_forward_check_is_reported_stored_and_matches_an_independent_replay(ramp_log, folder_fit):
     log, _ = ramp_log
-    _, text, out = folder_fit
+    _, text, out, _ = folder_fit
     assert "forward simulation (true stick-slip law, the whole log, " in text
     meta = load_calibration(out).metadata
     rms, largest, limit = meta["forward_simulation_rms_m"], meta["forward_simulation_max_m"], meta["forward_simulation_limit_m"]
@@ -119,21 +131,27 @@ def test_a_cart_that_never_moves_exits_3_saying_what_to_record(capsys, tmp_path)
 
 def test_fit_reads_an_old_lab_log_folder_like_the_same_log_as_csv(ramp_test_fit, folder_fit):
     log, path, result = ramp_test_fit
-    folder, _, out = folder_fit
+    folder, _, out, (logs, params0, options) = folder_fit
     # The folder and the CSV file read as the same log: the same samples to 1e-9 (a millionth of a sample
     # period and of the encoder step; the folder's time is re-zeroed, the CSV keeps 15 digits) ...
     from_folder, from_csv = read_log(folder), read_log(path)
     for name in ("t", "V", "x"):
         assert np.allclose(getattr(from_folder, name), getattr(from_csv, name), rtol=0, atol=1e-9), name
-    # ... and the command line's fit of the folder is the API's fit of that log, within what the log determines
-    # (a last-digit change of the data may move a parameter it barely determines, v1, across the line to bounded).
+    # ... and the command line fits it as the Python API does by default: the same log, the same start
+    # (the one rule inside fit_parameters, start="auto") and the same settings, so the same answer.
+    assert len(logs) == 1 and len(logs[0]) == len(log)
+    for name in ("V", "x"):
+        assert np.allclose(getattr(logs[0], name), getattr(log, name), rtol=0, atol=1e-9), name
+    assert params0 == PlantParameters.preset("none")
+    assert options["start"] == "auto" and tuple(options["fit"]) == DEFAULT_FIT and not options["fit_mass"]
+    assert options["interval"] == pytest.approx(0.01)
+    assert set(options) <= {"fit", "fit_mass", "interval", "start", "on_progress"}  # nothing else differs from the API's defaults
+    # The file written holds the API's answer and what the log determined of each parameter.
     cal = load_calibration(out)
-    meta, fitted = cal.metadata, cal.apply(PlantParameters.preset("none"))
-    both = [n for n, s in result.determination.items() if s == meta["determination"][n] == "determined"]
-    assert {"F1", "Beq", "force_gain"} <= set(both)
-    for name in both:
-        sigma = max(result.uncertainty[name], meta["uncertainty"][name])
-        assert getattr(fitted, name) == pytest.approx(result.values[name], abs=sigma), name
+    fitted = cal.apply(PlantParameters.preset("none"))
+    for name in result.names:
+        assert getattr(fitted, name) == pytest.approx(result.values[name], rel=1e-12), name
+        assert cal.metadata["determination"][name] == result.determination[name]
 
 
 def test_a_bad_old_lab_folder_is_one_line_exit_2(capsys, tmp_path):

@@ -115,6 +115,7 @@ from typing import Any, Callable, Iterable, NamedTuple, Sequence
 import casadi as ca
 import numpy as np
 
+from pendulab.calibration import _observer, _polish, _replay
 from pendulab.calibration.files import FITTED_NAMES, Calibration
 from pendulab.calibration.logs import RampLog, encoder_step
 from pendulab.errors import CalibrationError, FitRejected
@@ -468,11 +469,407 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
             )
 
 
-# ---------------------------------------------------------------------- the fit
+# ---------------------------------------------------------------------- the fit's stages
 #: Default process noise per shooting interval (x m, xdot m/s, alpha rad, alphadot rad/s).
 PROCESS_NOISE = (5e-6, 5e-4, 5e-5, 5e-3)
 
 
+@dataclass
+class _Setup:
+    """What every stage of one fit shares: the logs, the fitted names with their scaling and bounds, the settings."""
+
+    logs: list[RampLog]
+    params0: PlantParameters  # the start (after :func:`ramp_start`) and every parameter not fitted
+    names: tuple[str, ...]
+    scales: np.ndarray  # theta = value / scale
+    theta0: np.ndarray  # the start, scaled
+    theta_default: np.ndarray  # the lab's defaults, scaled
+    space: _polish.Space
+    interval: float  # the smoothed problem's shooting interval (s)
+    pieces: list[tuple[RampLog, int, int]]  # what the searches see of long logs (:func:`_pieces`)
+    voltage_noise: float  # the logged voltage's sample noise (V; the largest over the logs)
+    progress: Callable[[str], None]
+    polish_iter: int
+    polish_work: float
+    prebuild: Any = None  # the replay's compiled functions, building in another process
+
+    def built(self) -> None:
+        """Wait for the replay's compiled functions (:func:`pendulab.calibration._replay.prepare_in_background`)."""
+        if self.prebuild is not None:
+            self.prebuild.wait()
+            self.prebuild = None
+
+    @property
+    def with_pendulum(self) -> bool:
+        return self.params0.Mp > 0
+
+    @property
+    def step(self) -> float:
+        """The cart encoder's step (m)."""
+        return float(self.params0.q_x)
+
+    @property
+    def denoise(self) -> bool:
+        """Whether the logged voltage carries sample noise the motor never saw (a measured, not a commanded,
+        voltage; the cart alone): then the search follows its denoised twin, the polish tries both, and a
+        force threshold is no better known than that noise's drive."""
+        return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
+
+    def stride(self, log: RampLog) -> int:
+        """Samples per shooting interval (and between the state estimates) of ``log``."""
+        return max(1, int(round(self.interval / log.period)))
+
+    def used(self, log: RampLog) -> int:
+        """The samples of ``log`` the fit sees: whole shooting intervals."""
+        M = self.stride(log)
+        return ((len(log) - 1) // M) * M + 1
+
+    def values(self, theta: np.ndarray) -> dict[str, float]:
+        return {n: float(v * s) for n, v, s in zip(self.names, theta, self.scales)}
+
+
+@dataclass
+class _Candidate:
+    """A search's answer (stage 1): scaled values, the logs as it estimated them, what the polish starts from."""
+
+    theta: np.ndarray
+    start: np.ndarray  # where the search started (scaled): a start of the polish too
+    stats: dict[str, Any]  # the solver's return_status, iter_count, success
+    rms: float  # the search's own residual RMS (m)
+    whole: list[_LogEstimate]
+    replays: list[_polish.Anchors]  # the whole logs' restarts for the replay
+    n_intervals: int = 0  # shooting intervals (0: the observer search)
+    others: tuple[np.ndarray, ...] | None = None  # the observer search's other starts' answers (None: the smoothed problem's)
+
+
+@dataclass
+class _Answer:
+    """A candidate polished on the replay (stage 2)."""
+
+    candidate: _Candidate
+    polished: _polish.Polished
+    searched: list[_polish.Anchors]  # what the polish replayed (pieces of long logs; the chosen voltage)
+    replays: list[_polish.Anchors]  # the whole logs, with the chosen voltage
+    rms: float  # replay RMS over the whole logs (m)
+
+
+def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEstimate]) -> list[_polish.Anchors]:
+    """The logs' anchors cut to the pieces (long logs are searched on pieces, each from its state estimate)."""
+    if all(piece is whole[j].log for piece, j, _ in setup.pieces):
+        return replays
+    ns = 4 if setup.with_pendulum else 2
+    return [
+        replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
+        for piece, j, first in setup.pieces
+    ]
+
+
+@dataclass
+class _Shooting:
+    """Settings of the smoothed problem (:func:`_smoothed_search`)."""
+
+    max_substep: float
+    process_noise: Sequence[float]
+    regularization: float
+    max_iter: int
+    tolerance: float
+    compile: bool | None
+    verbose: bool
+
+
+def _smoothed_search(setup: _Setup, shooting: _Shooting, width_scale: float) -> Callable[[np.ndarray], _Candidate]:
+    """Stage 1 with the pendulum (and the cart's fallback): the smoothed problem, multiple shooting, with the
+    law's switch widths times ``width_scale``; returns its solve from a scaled start."""
+    from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
+    from pendulab.native import VM_FALLBACK_NOTE, install_hint
+
+    names, scales, params0, logs, with_pendulum = setup.names, setup.scales, setup.params0, setup.logs, setup.with_pendulum
+    ns = 4 if with_pendulum else 2
+    all_names = PlantParameters.names()
+    fitted_idx = tuple(all_names.index(n) for n in names)
+    p0 = np.asarray(params0.as_vector(), dtype=float)
+    defect_sigma = np.asarray(shooting.process_noise, dtype=float)[:ns]
+    t_prepare = time.perf_counter()
+    functions: dict[tuple[int, int], IntervalFunctions] = {}
+    blocks: list[LogBlock] = []
+    offset_w, offset_r = len(names), 0
+    for log in (piece for piece, _, _ in setup.pieces):
+        M = setup.stride(log)
+        n_sub = max(1, int(math.ceil(log.period / shooting.max_substep - 1e-9)))
+        if (M, n_sub) not in functions:
+            functions[M, n_sub] = IntervalFunctions(fit_model(width_scale)[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, shooting.compile)
+        used = ((len(log) - 1) // M) * M + 1
+        sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
+        nodes0 = _initial_states(log, with_pendulum)[:used:M]
+        block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
+        blocks.append(block)
+        offset_w += block.n_w
+        offset_r += block.n_r
+    setup.built()  # the replay's functions compiled beside these (a first fit on a machine builds both)
+    if any(f.built for f in functions.values()):
+        setup.progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
+    problem = Problem(blocks, len(names), scales, setup.theta0, shooting.regularization)
+    compiled = all(f.compiled for f in functions.values())
+
+    # IPOPT sees 1/2 |r(w)|^2 with the gradient J^T r and the Gauss-Newton Hessian J^T J.
+    w, r_jac, J = problem.w, problem.residuals_jac, problem.jacobian
+    p_none = ca.MX(0, 1)
+    grad_f = ca.Function("fit_grad_f", [w, p_none], [0.5 * ca.sumsqr(r_jac), ca.mtimes(J.T, r_jac)], ["x", "p"], ["f", "grad_f_x"])
+    lam_f = ca.MX.sym("lam_f")
+    theta = w[: len(names)]
+
+    def value_of(name: str) -> ca.MX | float:
+        return theta[names.index(name)] * scales[names.index(name)] if name in names else getattr(params0, name)
+
+    order = [value_of(high) - value_of(low) for low, high in (("F1", "F2"), ("v1", "v2")) if low in names or high in names]
+    g = ca.vertcat(*order) if order else ca.MX(0, 1)
+    lam_g = ca.MX.sym("lam_g", g.shape[0])
+    hess_lag = ca.Function(
+        "fit_gauss_newton", [w, p_none, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
+        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
+    )
+    verbose = shooting.verbose
+    options = {
+        "grad_f": grad_f,
+        "hess_lag": hess_lag,
+        "print_time": bool(verbose),
+        "calc_lam_p": False,
+        "calc_lam_x": False,
+        "no_nlp_grad": True,
+        "ipopt": {"max_iter": shooting.max_iter, "tol": shooting.tolerance, "acceptable_tol": 1e-1, "print_level": 5 if verbose else 0, "sb": "yes",
+                  "mu_init": 1e-4, "mu_strategy": "adaptive", "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-9},
+    }
+    lbx = np.concatenate([np.array([_LOWER[n] for n in names]) / scales, np.full(problem.n_w - len(names), -np.inf)])
+    ubx = np.concatenate([np.array([_UPPER[n] for n in names]) / scales, np.full(problem.n_w - len(names), np.inf)])
+    n_intervals = sum(b.N for b in blocks)
+    setup.progress(
+        f"fitting {', '.join(names)} to {len(logs)} log(s): {sum(len(log) for log in logs)} samples, {n_intervals} shooting intervals"
+        + (f" (the friction law's switches {width_scale:g} times wider)" if width_scale != 1 else "")
+        + ("" if compiled else f" ({VM_FALLBACK_NOTE}; to compile it, {install_hint()})")
+    )
+    solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
+    solution_of = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])
+
+    def solve(theta_start: np.ndarray) -> _Candidate:
+        """The smoothed problem solved from ``theta_start``: its answer, state estimates and the logs' anchors."""
+        x_start = np.concatenate([theta_start] + [b.nodes0.ravel() for b in blocks])
+        solution = solver(x0=x_start, lbx=lbx, ubx=ubx, lbg=np.zeros(g.shape[0]), ubg=np.full(g.shape[0], np.inf))
+        stats = solver.stats()
+        w_opt = np.asarray(solution["x"]).ravel()
+        setup.progress(f"IPOPT (smoothed friction): {stats.get('return_status')} after {stats.get('iter_count')} iterations")
+        outputs = [np.asarray(y) for y in solution_of(w_opt)[2:]]
+        errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
+        _, nodes = problem.split(w_opt)
+        whole: list[_LogEstimate] = []
+        for j, log in enumerate(logs):
+            M, used = setup.stride(log), setup.used(log)
+            estimates = _initial_states(log, with_pendulum)[:used:M].T.copy()
+            fitted = np.full(used, np.nan)
+            for (_, owner, first), b, S, y in zip(setup.pieces, blocks, nodes, outputs):
+                if owner == j:
+                    k = first // M
+                    estimates[:, k : k + S.shape[1]] = S[:, : estimates.shape[1] - k]
+                    fitted[first : first + b.used] = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()][: used - first]
+            sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
+            whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
+        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
+        return _Candidate(w_opt[: len(names)], np.asarray(theta_start, dtype=float), stats, float(np.sqrt(np.mean(errors**2))), whole, replays, n_intervals)
+
+    return solve
+
+
+def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
+    """Stage 1 for the cart alone: the observer search (:mod:`pendulab.calibration._observer`) from the start,
+    the lab's defaults and the logs' own estimate; the replay's polish goes on from its answer."""
+    names, space, theta0 = setup.names, setup.space, setup.theta0
+    whole = []
+    for log in setup.logs:
+        M, used = setup.stride(log), setup.used(log)
+        sigma = np.array([_noise_level(log.x[:used])])
+        whole.append(_LogEstimate(log, used, M, _initial_states(log, False)[:used:M].T.copy(), np.full(used, np.nan), sigma))
+    replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, False) for e in whole]
+    searched = _pieces_of(setup, replays, whole)
+    if setup.denoise:
+        searched = [_polish.denoised(a) for a in searched]  # the observer follows the drive the motor got
+    starts = [theta0]
+    if np.max(np.abs(setup.theta_default / theta0 - 1)) > 0.05:
+        starts.append(setup.theta_default)
+    if start_from_logs:
+        estimate = _start_from_logs(setup.logs, setup.params0, names, setup.progress)
+        starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / setup.scales))
+    found = _observer.search(searched, space, starts)
+    n_errors = sum(a.n for a in searched)
+    rms_observed = math.sqrt(found.cost / n_errors) * float(np.mean([a.sigma[0] for a in searched]))
+    setup.progress(
+        f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
+        f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
+    )
+    omega = _observer.OMEGAS[-1]
+    for e, a in zip(whole, replays):
+        y = a.measured[:, 0]
+        predicted = _replay.observe(space.vectors(found.theta[None]), a.V, a.t, y, a.x0, _observer.observer_gain(omega, e.log.period), free=names)[0]
+        e.fitted[:] = np.r_[a.x0[0], predicted]
+    stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
+    return _Candidate(found.theta, theta0, stats, rms_observed, whole, replays, others=found.others)
+
+
+def _polished(setup: _Setup, candidate: _Candidate, scans: bool = True) -> _Answer:
+    """Stage 2: a search's answer polished on the replay under the true law; its replay RMS over the whole logs."""
+    space, names = setup.space, setup.names
+    replays = candidate.replays
+    # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
+    searched = _pieces_of(setup, replays, candidate.whole)
+    # The polish starts from the search's answer, or from where the search started if that replays the logs
+    # better (a start from a ramp test's extraction can be nearer than the smoothed answer, whose smoothing
+    # biases it). The observer barely sees the common scale of a slow log (a weak model's predictions are as
+    # good: the observer corrects them): the other starts' answers are candidates too.
+    first = candidate.theta
+    starts = np.array([first, *(candidate.others or ()), space.project(candidate.start.copy())])
+    voltages = [searched]
+    if setup.denoise:
+        # Noise the motor never saw flips the stick-slip law's decisions near a threshold (a level 1 % below
+        # the breakaway force breaks away in the replay): the denoised twin is tried too, and the better of
+        # the two (at the better start) is searched.
+        voltages.append([_polish.denoised(a) for a in searched])
+    which = 0
+    if len(voltages) > 1 or candidate.others is None:  # the observer's answers are chosen below, not by the replay
+        costs = [_polish.costs(v, space, starts) for v in voltages]
+        which = int(np.argmin([float(np.min(c)) for c in costs]))
+        first = starts[int(np.argmin(costs[which]))]
+    searched = voltages[which]
+    if candidate.others is not None:
+        # Among the observer search's answers an observer of narrow bandwidth chooses: it sees the common scale
+        # as the replay does, without the replay's needle (on a sweep of the unseen rig the replay chose an answer
+        # that polished to 2.9 encoder steps; the observer at 20 rad/s chooses the search's own answer).
+        first = starts[int(np.argmin(_observer.costs(searched, space, starts, CHOICE_OMEGA)))]
+    if which:
+        replays = [_polish.denoised(a) for a in replays]
+    polish_iter, work = setup.polish_iter, setup.polish_work
+    result = _polish.polish(searched, space, first, max_iter=polish_iter, work=work)
+    target = (REFINE_ABOVE_STEPS * setup.step / searched[0].sigma[0]) ** 2 * sum(a.measured.size for a in searched)
+    for _ in range(REFINE_ROUNDS):
+        if result.cost <= target:
+            break
+        # Still more than a couple of encoder steps: step along the slanted valleys, then search again.
+        theta, cost = _polish.refine_pairs(searched, space, result.theta)
+        if cost >= result.cost:
+            break
+        result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=6)
+    for _ in range(SCAN_CYCLES if scans else 0):
+        if result.cost <= target:
+            break
+        # Still more than a couple of encoder steps: scans along what slow logs confuse (the common
+        # scale of the gain, forces and drags; B folded into Beq with the slip region gone; each
+        # parameter over a factor 9), which see other basins a local search cannot, then the polish.
+        scanned = _polish.scan_directions(searched, space, result.theta)
+        if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
+            break
+        result = result.then(_polish.polish(searched, space, scanned.theta, max_iter=polish_iter, scan=()), replays=scanned.replays)
+        setup.progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
+    if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
+        result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
+    errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
+    rms = float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * float(np.mean([a.sigma[0] for a in replays]))
+    setup.progress(
+        f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): "
+        f"cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um"
+    )
+    return _Answer(candidate, result, searched, replays, rms)
+
+
+def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: float) -> FitResult:
+    """Stage 3: the answer's profile, uncertainties and check (the whole logs replayed): the fit's result."""
+    names, scales, space, params0 = setup.names, setup.scales, setup.space, setup.params0
+    candidate, searched, replays = answer.candidate, answer.searched, answer.replays
+    theta_opt = answer.polished.theta
+    values = setup.values(theta_opt)
+    params = params0.with_values(**values)
+
+    # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
+    # they do not identify keeps its start value (if the replay stays as good with it).
+    prof = _polish.profile(searched, space, theta_opt)
+    kept = [j for j, s_ in enumerate(prof.status) if s_ == _polish.NOT_IDENTIFIED]
+    if kept:
+        trial = theta_opt.copy()
+        trial[kept] = setup.theta0[kept]
+        trial = space.project(trial)
+        r_trial = space.residuals(searched, trial[None])[0]
+        if float(r_trial @ r_trial) <= answer.polished.cost + prof.threshold:
+            theta_opt = trial
+            values = setup.values(theta_opt)
+            params = params0.with_values(**values)
+    if _polish.DETERMINED not in prof.status:
+        raise FitRejected(
+            "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
+            f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
+        )
+    uncertainty = prof.sigma.copy()
+    # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
+    # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
+    if setup.denoise:
+        from pendulab.calibration.extract import motor_constants
+
+        K, _ = motor_constants(params.with_values(force_gain=1.0))
+        for j, n in enumerate(names):
+            if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
+                uncertainty[j] = max(uncertainty[j], params.force_gain * K * setup.voltage_noise / scales[j])
+    uncertainty_method = (
+        "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
+        f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance and the cluster-robust "
+        "covariance (the stretches between restarts as clusters) of the determined ones"
+        + (f"; the forces at least the drive of the logged voltage's noise ({setup.voltage_noise * 1e3:.2g} mV)" if setup.denoise else "")
+    )
+
+    # The check: the whole logs replayed with the answer (restarted only where the state is known).
+    curves, forward_errors, regimes = [], [], []
+    vector = np.asarray(params.as_vector(), dtype=float)[None, :]
+    for e, a in zip(candidate.whole, replays):
+        states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
+        simulated = np.r_[a.x0[0], states[:, 0]]
+        regimes.append(slip_shares(params, a.V, states))
+        log, used = e.log, e.used
+        curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
+        forward_errors.append(simulated - log.x[:used])
+    forward = np.concatenate(forward_errors)
+    forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
+    forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
+    setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
+
+    status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, setup.step)
+    allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)}
+    status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
+    confidence = "; ".join(note for note in (confidence, regime_note) if note)
+    if confidence:
+        setup.progress(confidence)
+    stats = candidate.stats
+    return FitResult(
+        names=names,
+        values=values,
+        initial={n: float(v) for n, v in zip(names, start_values)},
+        uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
+        uncertainty_method=uncertainty_method,
+        determination=dict(zip(names, status)),
+        confidence=confidence,
+        allowed=allowed,
+        restarts=sum(len(a.restarts) for a in replays),
+        voltage_filtered=any(a.denoised for a in replays),
+        residual_rms=candidate.rms,
+        params=params,
+        n_samples=sum(len(log) for log in setup.logs),
+        n_intervals=candidate.n_intervals,
+        iterations=int(stats.get("iter_count", -1)),
+        success=bool(stats.get("success", False)),
+        status=str(stats.get("return_status", "unknown")),
+        seconds=time.perf_counter() - t_start,
+        curves=tuple(curves),
+        forward_rms=forward_rms,
+        forward_max=forward_max,
+        encoder_step=setup.step,
+        travel=max(float(np.ptp(e.log.x[: e.used])) for e in candidate.whole),
+    )
+
+
+# ---------------------------------------------------------------------- the fit
 def fit_parameters(
     logs: Iterable[RampLog],
     params0: PlantParameters | None = None,
@@ -549,10 +946,6 @@ def fit_parameters(
     >>> # skipped: a fit compiles its replay and takes tens of seconds (tests/test_fit*.py run it)
     >>> result = fit_parameters([read_log("ramp.csv")])       # doctest: +SKIP
     """
-    from pendulab.calibration import _observer, _polish, _replay
-    from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
-    from pendulab.native import VM_FALLBACK_NOTE, install_hint
-
     t_start = time.perf_counter()
     progress = on_progress or (lambda text: None)
     logs = list(logs)
@@ -564,15 +957,7 @@ def fit_parameters(
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
     with_pendulum = params0.Mp > 0
-    ns = 4 if with_pendulum else 2
-    all_names = PlantParameters.names()
-    fitted_idx = tuple(all_names.index(n) for n in names)
-    p0 = np.asarray(params0.as_vector(), dtype=float)
-
-    def samples_per_interval(log: RampLog) -> int:
-        return max(1, int(round(interval / log.period)))
-
-    _check_logs(logs, with_pendulum, samples_per_interval)
+    _check_logs(logs, with_pendulum, lambda log: max(1, int(round(interval / log.period))))
     if start not in ("auto", "given"):
         raise CalibrationError(f"start={start!r}: choose 'auto' (from the logs where they are ramp tests) or 'given'")
     if start == "auto":
@@ -581,355 +966,61 @@ def fit_parameters(
     start_values = np.array([getattr(params0, n) for n in names])
     scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start_values)])
     theta0 = start_values / scales
-    defect_sigma = np.asarray(process_noise, dtype=float)[:ns]
-
-    # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
-    # them; the polish and the check see everything.
-    pieces = _pieces(logs, samples_per_interval)
-    # The replay's compiled functions build in another process beside the shooting functions (a first
-    # fit on a machine compiles both; the compilers then run side by side).
-    prebuild = _replay.prepare_in_background(params0, [log.period for log in logs], names) if compile is not False else None
-    step = float(params0.q_x)
-    n_samples = sum(len(log) for log in logs)
-
-    def build_smoothed(width_scale: float) -> Callable[[np.ndarray], dict[str, Any]]:
-        """The smoothed problem with the law's switch widths times ``width_scale`` (logs with the pendulum): its solve."""
-        nonlocal prebuild
-        t_prepare = time.perf_counter()
-        functions: dict[tuple[int, int], IntervalFunctions] = {}
-        blocks: list[LogBlock] = []
-        offset_w, offset_r = len(names), 0
-        for log in (piece for piece, _, _ in pieces):
-            M = samples_per_interval(log)
-            n_sub = max(1, int(math.ceil(log.period / max_substep - 1e-9)))
-            if (M, n_sub) not in functions:
-                functions[M, n_sub] = IntervalFunctions(fit_model(width_scale)[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, compile)
-            used = ((len(log) - 1) // M) * M + 1
-            sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-            nodes0 = _initial_states(log, with_pendulum)[:used:M]
-            block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
-            blocks.append(block)
-            offset_w += block.n_w
-            offset_r += block.n_r
-        if prebuild is not None:
-            prebuild.wait()
-            prebuild = None
-        if any(f.built for f in functions.values()):
-            progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
-        problem = Problem(blocks, len(names), scales, theta0, regularization)
-        compiled = all(f.compiled for f in functions.values())
-
-        # IPOPT sees 1/2 |r(w)|^2 with the gradient J^T r and the Gauss-Newton Hessian J^T J.
-        w, r_jac, J = problem.w, problem.residuals_jac, problem.jacobian
-        p_none = ca.MX(0, 1)
-        grad_f = ca.Function("fit_grad_f", [w, p_none], [0.5 * ca.sumsqr(r_jac), ca.mtimes(J.T, r_jac)], ["x", "p"], ["f", "grad_f_x"])
-        lam_f = ca.MX.sym("lam_f")
-        theta = w[: len(names)]
-
-        def value_of(name: str) -> ca.MX | float:
-            return theta[names.index(name)] * scales[names.index(name)] if name in names else getattr(params0, name)
-
-        order = [value_of(high) - value_of(low) for low, high in (("F1", "F2"), ("v1", "v2")) if low in names or high in names]
-        g = ca.vertcat(*order) if order else ca.MX(0, 1)
-        lam_g = ca.MX.sym("lam_g", g.shape[0])
-        hess_lag = ca.Function(
-            "fit_gauss_newton", [w, p_none, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
-            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
-        )
-        options = {
-            "grad_f": grad_f,
-            "hess_lag": hess_lag,
-            "print_time": bool(verbose),
-            "calc_lam_p": False,
-            "calc_lam_x": False,
-            "no_nlp_grad": True,
-            "ipopt": {"max_iter": max_iter, "tol": tolerance, "acceptable_tol": 1e-1, "print_level": 5 if verbose else 0, "sb": "yes", "mu_init": 1e-4, "mu_strategy": "adaptive",
-                      "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-9},
-        }
-        lbx = np.concatenate([np.array([_LOWER[n] for n in names]) / scales, np.full(problem.n_w - len(names), -np.inf)])
-        ubx = np.concatenate([np.array([_UPPER[n] for n in names]) / scales, np.full(problem.n_w - len(names), np.inf)])
-        n_intervals = sum(b.N for b in blocks)
-        progress(
-            f"fitting {', '.join(names)} to {len(logs)} log(s): {n_samples} samples, {n_intervals} shooting intervals"
-            + (f" (the friction law's switches {width_scale:g} times wider)" if width_scale != 1 else "")
-            + ("" if compiled else f" ({VM_FALLBACK_NOTE}; to compile it, {install_hint()})")
-        )
-        solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
-        solution_of = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])
-
-        def smoothed_fit(theta_start: np.ndarray) -> dict[str, Any]:
-            """The smoothed problem solved from ``theta_start``: its answer, state estimates and the logs' anchors."""
-            x_start = np.concatenate([theta_start] + [b.nodes0.ravel() for b in blocks])
-            solution = solver(x0=x_start, lbx=lbx, ubx=ubx, lbg=np.zeros(g.shape[0]), ubg=np.full(g.shape[0], np.inf))
-            stats = solver.stats()
-            w_opt = np.asarray(solution["x"]).ravel()
-            progress(f"IPOPT (smoothed friction): {stats.get('return_status')} after {stats.get('iter_count')} iterations")
-            at_solution = solution_of(w_opt)
-            outputs = [np.asarray(y) for y in at_solution[2:]]
-            errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
-            _, nodes = problem.split(w_opt)
-            whole: list[_LogEstimate] = []
-            for j, log in enumerate(logs):
-                M = samples_per_interval(log)
-                used = ((len(log) - 1) // M) * M + 1
-                estimates = _initial_states(log, with_pendulum)[:used:M].T.copy()
-                fitted = np.full(used, np.nan)
-                for (_, owner, first), b, S, y in zip(pieces, blocks, nodes, outputs):
-                    if owner == j:
-                        k = first // M
-                        estimates[:, k : k + S.shape[1]] = S[:, : estimates.shape[1] - k]
-                        fitted[first : first + b.used] = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()][: used - first]
-                sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-                whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
-            replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, with_pendulum) for e in whole]
-            return {
-                "w": w_opt, "stats": stats, "r": np.asarray(at_solution[0]).ravel(), "J": at_solution[1],
-                "rms": float(np.sqrt(np.mean(errors**2))), "whole": whole, "replays": replays, "problem": problem,
-                "n_intervals": n_intervals, "start": np.asarray(theta_start, dtype=float),
-            }
-
-        return smoothed_fit
-
+    defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     lower = np.array([_LOWER[n] for n in names]) / scales
     upper = np.array([_UPPER[n] for n in names]) / scales
     prior = (theta0, regularization) if regularization > 0 else None
-    space = _polish.Space(params0, names, scales, lower, upper, prior)
+    setup = _Setup(
+        logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
+        theta_default=np.array([getattr(defaults, n) for n in names]) / scales,
+        space=_polish.Space(params0, names, scales, lower, upper, prior), interval=interval,
+        pieces=[], voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
+        polish_iter=polish_iter, polish_work=polish_work,
+    )
+    # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
+    # them; the polish and the check see everything.
+    setup.pieces = _pieces(logs, setup.stride)
+    # The replay's compiled functions build in another process beside the shooting functions (a first
+    # fit on a machine compiles both; the compilers then run side by side).
+    if compile is not False:
+        setup.prebuild = _replay.prepare_in_background(params0, [log.period for log in logs], names)
+    shooting = _Shooting(max_substep, process_noise, regularization, max_iter, tolerance, compile, verbose)
+    step = max(setup.step, 1e-6)
 
-    def pieces_of(replays: list[_polish.Anchors], whole: list[_LogEstimate]) -> list[_polish.Anchors]:
-        """The logs' anchors cut to the pieces (long logs are searched on pieces, each from its state estimate)."""
-        if all(piece is whole[j].log for piece, j, _ in pieces):
-            return replays
-        return [
-            replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
-            for piece, j, first in pieces
-        ]
-
-    def observed_fit() -> dict[str, Any]:
-        """The cart alone: the observer search (:mod:`pendulab.calibration._observer`) from the start, the lab's
-        defaults and the logs' own estimate; the replay's polish goes on from its answer."""
-        whole = []
-        for log in logs:
-            M = samples_per_interval(log)
-            used = ((len(log) - 1) // M) * M + 1
-            sigma = np.array([_noise_level(log.x[:used])])
-            whole.append(_LogEstimate(log, used, M, _initial_states(log, False)[:used:M].T.copy(), np.full(used, np.nan), sigma))
-        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, step, False) for e in whole]
-        searched = pieces_of(replays, whole)
-        if any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
-            searched = [_polish.denoised(a) for a in searched]  # the observer follows the drive the motor got
-        starts = [theta0]
-        if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
-            starts.append(theta_default)
-        if start_from_logs:
-            estimate = _start_from_logs(logs, params0, names, progress)
-            starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / scales))
-        found = _observer.search(searched, space, starts)  # (the background build was waited for before the choice of search)
-        n_errors = sum(a.n for a in searched)
-        rms_observed = math.sqrt(found.cost / n_errors) * float(np.mean([a.sigma[0] for a in searched]))
-        progress(
-            f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
-            f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
-        )
-        omega = _observer.OMEGAS[-1]
-        for e, a in zip(whole, replays):
-            y = a.measured[:, 0]
-            predicted = _replay.observe(space.vectors(found.theta[None]), a.V, a.t, y, a.x0, _observer.observer_gain(omega, e.log.period), free=names)[0]
-            e.fitted[:] = np.r_[a.x0[0], predicted]
-        stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
-        return {"w": found.theta, "others": found.others, "stats": stats, "rms": rms_observed, "whole": whole, "replays": replays, "n_intervals": 0, "start": theta0}
-
-    def polished_fit(candidate: dict[str, Any], scans: bool = True) -> dict[str, Any]:
-        """A search's answer (smoothed or observer) polished on the replay; its replay RMS over the whole logs."""
-        whole, replays = candidate["whole"], candidate["replays"]
-        # Long logs are polished (and refitted in parts) on the smoothed fit's pieces, each from its state
-        # estimate there; the check replays everything.
-        searched = pieces_of(replays, whole)
-        # The polish starts from the smoothed answer, or from where the smoothed fit started if that
-        # replays the logs better (a start from a ramp test's extraction can be nearer than the smoothed
-        # answer, whose smoothing biases it).
-        first = candidate["w"][: len(names)]
-        # The search's observer barely sees the common scale of a slow log (a weak model's predictions are as
-        # good: the observer corrects them): the other starts' answers are candidates too (chosen below).
-        starts = np.array([first, *candidate.get("others", ()), space.project(candidate["start"].copy())])
-        voltages = [searched]
-        if not with_pendulum and any(_polish.voltage_noise(a.V) > _polish.VOLTAGE_NOISE for a in replays):
-            # A logged voltage with sample noise the motor never saw (a measured, not a commanded,
-            # voltage) flips the stick-slip law's decisions near a threshold: a level 1 % below the
-            # breakaway force breaks away in the replay. Its denoised twin is tried too, and the better
-            # of the two (at the better start) is searched.
-            voltages.append([_polish.denoised(a) for a in searched])
-        which = 0
-        if len(voltages) > 1 or "others" not in candidate:  # the observer's answers are chosen below, not by the replay
-            costs = [_polish.costs(v, space, starts) for v in voltages]
-            which = int(np.argmin([float(np.min(c)) for c in costs]))
-            first = starts[int(np.argmin(costs[which]))]
-        searched = voltages[which]
-        if "others" in candidate:
-            # Among the observer search's answers an observer of narrow bandwidth chooses: it sees the common scale
-            # as the replay does, without the replay's needle (on a sweep of the unseen rig the replay chose an answer
-            # that polished to 2.9 encoder steps; the observer at 20 rad/s chooses the search's own answer).
-            first = starts[int(np.argmin(_observer.costs(searched, space, starts, CHOICE_OMEGA)))]
-        if which:
-            replays = [_polish.denoised(a) for a in replays]
-        result = _polish.polish(searched, space, first, max_iter=polish_iter, work=polish_work)
-        target = (REFINE_ABOVE_STEPS * step / searched[0].sigma[0]) ** 2 * sum(a.measured.size for a in searched)
-        for _ in range(REFINE_ROUNDS):
-            if result.cost <= target:
-                break
-            # Still more than a couple of encoder steps: step along the slanted valleys, then search again.
-            theta, cost = _polish.refine_pairs(searched, space, result.theta)
-            if cost >= result.cost:
-                break
-            result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=6)
-        for _ in range(SCAN_CYCLES if scans else 0):
-            if result.cost <= target:
-                break
-            # Still more than a couple of encoder steps: scans along what slow logs confuse (the common
-            # scale of the gain, forces and drags; B folded into Beq with the slip region gone; each
-            # parameter over a factor 9), which see other basins a local search cannot, then the polish.
-            scanned = _polish.scan_directions(searched, space, result.theta)
-            if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
-                break
-            result = result.then(_polish.polish(searched, space, scanned.theta, max_iter=polish_iter, scan=()), replays=scanned.replays)
-            progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
-        if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
-            result = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
-        errors = _polish.replay_errors(replays, space.vectors(result.theta[None]), names)[0]
-        rms_replay = float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * float(np.mean([a.sigma[0] for a in replays]))
-        progress(
-            f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): "
-            f"cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {rms_replay * 1e6:.0f} um"
-        )
-        return {**candidate, "replays": replays, "polished": result, "searched": searched, "polished_rms": rms_replay}
-
-    def finish(best: dict[str, Any]) -> FitResult:
-        """The answer's profile, uncertainties and check: the fit's result."""
-        stats, rms = best["stats"], best["rms"]
-        whole, replays, searched, polished = best["whole"], best["replays"], best["searched"], best["polished"]
-        theta_opt = polished.theta
-        values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
-        params = params0.with_values(**values)
-
-        # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
-        # they do not identify keeps its start value (if the replay stays as good with it).
-        prof = _polish.profile(searched, space, theta_opt)
-        kept = [j for j, s_ in enumerate(prof.status) if s_ == _polish.NOT_IDENTIFIED]
-        if kept:
-            trial = theta_opt.copy()
-            trial[kept] = theta0[kept]
-            trial = space.project(trial)
-            r_trial = space.residuals(searched, trial[None])[0]
-            if float(r_trial @ r_trial) <= polished.cost + prof.threshold:
-                theta_opt = trial
-                values = {n: float(v * s_) for n, v, s_ in zip(names, theta_opt, scales)}
-                params = params0.with_values(**values)
-        if _polish.DETERMINED not in prof.status:
-            raise FitRejected(
-                "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
-                f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
-            )
-        uncertainty = prof.sigma.copy()
-        # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
-        # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
-        volt_noise = max(_polish.voltage_noise(log.V) for log in logs)
-        force_floor = volt_noise > _polish.VOLTAGE_NOISE and not with_pendulum
-        if force_floor:
-            from pendulab.calibration.extract import motor_constants
-
-            K, _ = motor_constants(params.with_values(force_gain=1.0))
-            for j, n in enumerate(names):
-                if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
-                    uncertainty[j] = max(uncertainty[j], params.force_gain * K * volt_noise / scales[j])
-        uncertainty_method = (
-            "the replay cost's profile along each parameter (where it rises by one effective chi-square unit, the errors' "
-            f"correlation length {prof.correlation:.0f} samples counted), at least the linearized covariance and the cluster-robust "
-            "covariance (the stretches between restarts as clusters) of the determined ones"
-            + (f"; the forces at least the drive of the logged voltage's noise ({volt_noise * 1e3:.2g} mV)" if force_floor else "")
-        )
-
-        # The check: the whole logs replayed with the answer (restarted only where the state is known).
-        curves, forward_errors, regimes = [], [], []
-        vector = np.asarray(params.as_vector(), dtype=float)[None, :]
-        for e, a in zip(whole, replays):
-            states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
-            simulated = np.r_[a.x0[0], states[:, 0]]
-            regimes.append(slip_shares(params, a.V, states))
-            log, used = e.log, e.used
-            curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
-            forward_errors.append(simulated - log.x[:used])
-        forward = np.concatenate(forward_errors)
-        forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
-        forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
-        progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
-
-        status, uncertainty, confidence = confidence_of(prof.status, uncertainty, forward_rms, float(params0.q_x))
-        allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, prof.allowed, scales)}
-        status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
-        confidence = "; ".join(note for note in (confidence, regime_note) if note)
-        if confidence:
-            progress(confidence)
-        return FitResult(
-            names=names,
-            values=values,
-            initial={n: float(v) for n, v in zip(names, start_values)},
-            uncertainty={n: float(u * s) for n, u, s in zip(names, uncertainty, scales)},
-            uncertainty_method=uncertainty_method,
-            determination=dict(zip(names, status)),
-            confidence=confidence,
-            allowed=allowed,
-            restarts=sum(len(a.restarts) for a in replays),
-            voltage_filtered=any(a.denoised for a in replays),
-            residual_rms=rms,
-            params=params,
-            n_samples=n_samples,
-            n_intervals=best["n_intervals"],
-            iterations=int(stats.get("iter_count", -1)),
-            success=bool(stats.get("success", False)),
-            status=str(stats.get("return_status", "unknown")),
-            seconds=time.perf_counter() - t_start,
-            curves=tuple(curves),
-            forward_rms=forward_rms,
-            forward_max=forward_max,
-            encoder_step=float(params0.q_x),
-            travel=max(float(np.ptp(e.log.x[: e.used])) for e in whole),
-        )
-
-    defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
-    theta_default = np.array([getattr(defaults, n) for n in names]) / scales
-    best: dict[str, Any] | None = None
+    best: _Answer | None = None
     # The observer search runs hundreds of batched observer runs: in CasADi's virtual machine (no C compiler)
     # that takes minutes, so there the smoothed problem alone is solved (a 3.8 s ramp: 15 s instead of 50 s).
-    if prebuild is not None and not with_pendulum:  # it builds the observer too: wait for it, not build it twice
-        prebuild.wait()
-        prebuild = None
+    if not with_pendulum:
+        setup.built()  # it builds the observer too: wait for it, not build it twice
     if not with_pendulum and compile is not False and all(_replay.observer_compiled(params0, log.period, names) for log in logs):
         # The cart alone: the observer search first; its answer stands if the replay confirms it.
-        best = polished_fit(observed_fit(), scans=False)
-        if best["polished_rms"] <= OBSERVER_ENOUGH_STEPS * max(step, 1e-6):
-            return finish(best)
-        progress(f"the observer's answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving the smoothed problem")
+        best = _polished(setup, _observer_search(setup, start_from_logs), scans=False)
+        if best.rms <= OBSERVER_ENOUGH_STEPS * step:
+            return _result(setup, best, start_values, t_start)
+        progress(f"the observer's answer does not replay the logs (RMS {best.rms * 1e6:.0f} um); solving the smoothed problem")
     # More tries while the polished answer misses the logs (a local minimum of the smoothed problem), each
     # above its own threshold (encoder steps): wider switches make a smoother problem with fewer wrong
     # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
     # with them where the narrow ones fail); then the lab's defaults (the logs' own estimate of the drive,
     # the drag and F1 is a start of the observer search). A try's answer wins only if it replays clearly better.
-    smoothed_fit = build_smoothed(1.0)
-    other = polished_fit(smoothed_fit(theta0))
-    if best is None or other["polished_rms"] < best["polished_rms"]:
+    smoothed = _smoothed_search(setup, shooting, 1.0)
+    other = _polished(setup, smoothed(theta0))
+    if best is None or other.rms < best.rms:
         best = other
-    tries: list[tuple[float, str, Callable[[], dict[str, Any]]]] = [
-        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: build_smoothed(WIDE_SWITCHES)(theta0)),
+    tries: list[tuple[float, str, Callable[[], _Candidate]]] = [
+        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: _smoothed_search(setup, shooting, WIDE_SWITCHES)(theta0)),
     ]
-    if np.max(np.abs(theta_default / theta0 - 1)) > 0.05:
-        tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed_fit(theta_default)))
+    if np.max(np.abs(setup.theta_default / theta0 - 1)) > 0.05:
+        tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed(setup.theta_default)))
     for above, label, solve in tries:
-        if best["polished_rms"] <= above * max(step, 1e-6):
+        if best.rms <= above * step:
             continue
-        progress(f"the answer does not replay the logs (RMS {best['polished_rms'] * 1e6:.0f} um); solving again {label}")
-        other = polished_fit(solve())
-        if other["polished_rms"] < FALLBACK_GAIN * best["polished_rms"]:
+        progress(f"the answer does not replay the logs (RMS {best.rms * 1e6:.0f} um); solving again {label}")
+        other = _polished(setup, solve())
+        if other.rms < FALLBACK_GAIN * best.rms:
             best = other
-    return finish(best)
+    return _result(setup, best, start_values, t_start)
+
 
 def confidence_of(
     status: Sequence[str], sigma: np.ndarray, forward_rms: float, step: float
