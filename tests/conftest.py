@@ -57,13 +57,13 @@ REALTIME_FILES = frozenset({
 RAMP_FIT_FILES = frozenset({"test_fit.py", "test_fit_checks.py"})
 
 
-#: The longest work units (a file, or a group above), longest first: pytest-xdist hands its units out in the
-#: collection's order, so these start first and the short files fill in after them (longest-first scheduling;
-#: xdist's own reordering goes by the number of tests, which put the few minute-long fits last, one worker
-#: finishing them while the other idled). Measured on 2 cores (s): the real-time group 300, test_fit_shapes 210,
-#: the ramp fit's group 170, test_fit_corpus 150, test_calibration_cli 73, test_wheel 55, test_gui_browser 53.
-LONGEST_FIRST = ("realtime", "test_fit_shapes.py", "ramp_test_fit", "test_fit_corpus.py", "test_calibration_cli.py",
-                 "test_wheel.py", "test_gui_browser.py")
+#: The order in which pytest-xdist hands out its work units (a file, or a group above), as the collection gives them:
+#: the real-time group first (300 s on 2 cores, one test after the other) beside the short files, then the minute-long
+#: fits, longest first (test_fit_shapes 210 s, the ramp fit's group 170, test_fit_corpus 150, test_calibration_cli 73).
+#: A fit beside a real-time test makes the rig's answers late: with the fits first, `calibrate --port` failed all three
+#: times (45 of 1000 answers late). xdist's own order, by the number of tests, put test_calibration_cli's fit early.
+FIRST = ("realtime",)
+LAST = ("test_fit_shapes.py", "ramp_test_fit", "test_fit_corpus.py", "test_calibration_cli.py")
 
 
 def work_unit(path: Path) -> str:
@@ -75,8 +75,8 @@ def pytest_collection_modifyitems(config, items):  # noqa: ANN001
     for item in items:
         if item.path.name in REALTIME_FILES:
             item.add_marker(pytest.mark.flaky(reruns=2, reruns_delay=1))
-    rank = {unit: k for k, unit in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(work_unit(item.path), len(rank)))  # stable: the rest keep their order
+    rank = {**{unit: -len(FIRST) + k for k, unit in enumerate(FIRST)}, **{unit: 1 + k for k, unit in enumerate(LAST)}}
+    items.sort(key=lambda item: rank.get(work_unit(item.path), 0))  # stable: within a rank, the collection's order
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -93,7 +93,7 @@ def pytest_xdist_make_scheduler(config, log):  # noqa: ANN001
             unit = work_unit(Path(file))
             return unit if unit != Path(file).name else file
 
-    config.option.loadscopereorder = False  # the collection's order (LONGEST_FIRST), not the number of tests
+    config.option.loadscopereorder = False  # the collection's order (FIRST, the rest, LAST), not the number of tests
     return ByFileRealTimeTogether(config, log)
 
 
