@@ -249,3 +249,22 @@ def test_a_session_cut_before_its_poke_has_no_metrics():
     # The same log, ended by the operator: not a cut, and the hand's release is not a poke.
     m = lab_metrics(columns, q_alpha=0.0015, end_reason="ended by the operator (e)", ended_early=False)
     assert m["poke_start_detected_s"] is None and "no poke found" in m["error"] and m.get("verdict") is None
+
+
+def test_a_session_that_starts_with_the_pendulum_hanging_is_judged_from_the_hands_release():
+    """The rig's log starts before the hand has raised the pendulum (hanging, |alpha| about pi, as the firmware twin's
+    sessions do): that is not a fall. A held session with its poke is judged from the release on."""
+    from pendulab.fmu.models.supervisor.config import RUNNING
+    from pendulab.hil.session import lab_metrics
+
+    t = np.arange(0.0, 8.0, 0.001)
+    raised, released, poked = t >= 0.3, t >= 0.5, t >= 2.0
+    swing = 0.05 * np.exp(-(t - 2.0) * 1.5) * np.sin(2 * np.pi * 1.2 * (t - 2.0))
+    alpha = np.where(poked, swing, np.where(raised, 0.0, np.pi - 0.06))
+    columns = {"t": t, "alpha": np.round(alpha / 0.0015) * 0.0015, "x": 0 * t, "xdot": 0 * t,
+               "voltage": np.where(released, np.where(poked, -20 * swing, 0.2), 0.0),
+               "supervisor_state": np.where(t >= 0.45, float(RUNNING), 1.0)}
+    m = lab_metrics(columns, q_alpha=0.0015, end_reason="ended by the operator (e)", ended_early=False)
+    assert m["hand_release_s"] == pytest.approx(0.5) and m["poke_start_detected_s"] == pytest.approx(2.0, abs=0.05)
+    assert m["verdict"]["outcome"] == "balanced", m["verdict"]["headline"]
+    assert not m["verdict"]["headline"].startswith("FELL") and m["stable"] is True

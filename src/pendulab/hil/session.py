@@ -555,7 +555,11 @@ def lab_metrics(columns: dict[str, np.ndarray], *, q_alpha: float, end_reason: s
                 from pendulab.cosim.seesaw import verdict_limits
 
                 limits = replace(verdict_limits(), q_alpha=q_alpha)
-            metrics, _ = assess(columns, poke_start=poke, limits=limits, safety_cut_time=cut,
+            # The verdict reads the run from the hand's release: before it the pendulum hangs or is held (the log can
+            # start with it hanging, |alpha| about pi), which is not a fall.
+            held = t >= release
+            judged = {k: (v[held] if isinstance(v, np.ndarray) and v.shape[:1] == t.shape else v) for k, v in columns.items()}
+            metrics, _ = assess(judged, poke_start=poke, limits=limits, safety_cut_time=cut,
                                 end_reason=end_reason if ended_early and not tripped.size else None, plant="seesaw" if seesaw else "pendulum")
         except Exception as exc:  # noqa: BLE001 - a log too short or odd for metrics still gets its files
             metrics = {"error": f"metrics could not be computed: {exc}"}
