@@ -474,6 +474,11 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
 PROCESS_NOISE = (5e-6, 5e-4, 5e-5, 5e-3)
 
 
+def _stride(log: RampLog, interval: float) -> int:
+    """Samples per shooting interval of ``interval`` seconds (and between the state estimates) of ``log``."""
+    return max(1, int(round(interval / log.period)))
+
+
 @dataclass
 class _Setup:
     """What every stage of one fit shares: the logs, the fitted names with their scaling and bounds, the settings."""
@@ -517,7 +522,7 @@ class _Setup:
 
     def stride(self, log: RampLog) -> int:
         """Samples per shooting interval (and between the state estimates) of ``log``."""
-        return max(1, int(round(self.interval / log.period)))
+        return _stride(log, self.interval)
 
     def used(self, log: RampLog) -> int:
         """The samples of ``log`` the fit sees: whole shooting intervals."""
@@ -598,7 +603,7 @@ def _smoothed_search(setup: _Setup, shooting: _Shooting, width_scale: float) -> 
         n_sub = max(1, int(math.ceil(log.period / shooting.max_substep - 1e-9)))
         if (M, n_sub) not in functions:
             functions[M, n_sub] = IntervalFunctions(fit_model(width_scale)[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, shooting.compile)
-        used = ((len(log) - 1) // M) * M + 1
+        used = setup.used(log)
         sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
         nodes0 = _initial_states(log, with_pendulum)[:used:M]
         block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
@@ -957,7 +962,7 @@ def fit_parameters(
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
     with_pendulum = params0.Mp > 0
-    _check_logs(logs, with_pendulum, lambda log: max(1, int(round(interval / log.period))))
+    _check_logs(logs, with_pendulum, lambda log: _stride(log, interval))
     if start not in ("auto", "given"):
         raise CalibrationError(f"start={start!r}: choose 'auto' (from the logs where they are ramp tests) or 'given'")
     if start == "auto":
