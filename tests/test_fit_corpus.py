@@ -59,6 +59,9 @@ def test_corpus_case_is_accepted_and_honest(name):
         assert row["steps"] <= 2.0 and abs(e["Beq"]) <= 0.05 and abs(e["force_gain"]) <= 0.05, bench.line(row)
         assert all(abs(e[n]) <= 0.10 for n in ("F1", "v1", "F2", "v2", "B") if s[n] == "determined"), bench.line(row)
         assert {"Beq", "force_gain", "F1", "B"} <= {n for n in s if s[n] == "determined"}, bench.line(row)
+    if case.shape == "closed loop":  # the pendulum swung, and its unstable replay restarts from the fit's state estimates
+        alpha = case.log().alpha
+        assert float(max(alpha) - min(alpha)) > 0.02 and row["restarts"] > 0
     if case.voltage_noise > 0:  # a force threshold is no better known than the noisy voltage it is read against
         from pendulab.calibration._polish import voltage_noise  # private: the fit's estimate of the logged voltage's noise
         from pendulab.calibration.extract import motor_constants

@@ -16,7 +16,7 @@ from pendulab.calibration._polish import rests  # private: the fit's rest detect
 from pendulab.calibration._replay import replay  # private: the fit's replay (restarts at rests) is checked
 from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, the reference replay
 from pendulab.calibration.fit import fit_parameters
-from pendulab.calibration.synthetic import TRUE, closed_loop_log, closed_loop_params, synthetic_log
+from pendulab.calibration.synthetic import TRUE, synthetic_log
 from pendulab.model.parameters import PlantParameters
 
 WITHIN = {"Beq": 0.05, "force_gain": 0.05, "F1": 0.10, "F2": 0.10, "B": 0.10}
@@ -66,16 +66,7 @@ def test_each_parameter_is_determined_within_three_sigmas_or_reported_bounded_or
     # (The force thresholds' floor from a noisy logged voltage: test_fit_corpus.py, on its noisy case.)
 
 
-def test_closed_loop_run_with_the_pendulum_up_uses_the_angle():
-    log, true = closed_loop_log(duration=8.0), closed_loop_params()
-    assert log.alpha is not None and np.ptp(log.alpha) > 0.02  # the poke swung it
-    start = true.with_values(F1=1.5, v1=0.005, F2=3.0, v2=0.05, B=20.0, Beq=4.3, force_gain=1.0)
-    result = fit_parameters([log], start)
-    errors = relative_errors(result, true)
-    for name, limit in WITHIN.items():
-        assert abs(errors[name]) <= limit, f"{name} {100 * errors[name]:+.1f} %"
-    assert result.restarts > 0  # the unstable replay restarts from the fit's state estimates
-    assert result.forward_rms <= 2 * true.q_x
+# The closed loop with the pendulum up (the same log and start): tests/test_fit_corpus.py, its 'closed loop | unseen' case.
 
 
 def test_replay_restarts_at_rests_so_the_true_values_replay_a_log_to_the_noise():

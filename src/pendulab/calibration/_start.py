@@ -44,6 +44,9 @@ from pendulab.model.parameters import PlantParameters
 SMOOTHING = 0.03
 #: The fraction of moving samples (the fastest) that seeds the fit of the drive and the drag.
 SEED_FRACTION = 0.2
+#: ... and at least this share of the top speed (its 99.5th percentile): where most moving samples slide
+#: in the slip region (a calibrate ramp test on a rig of strong slip drag), its fastest fifth is still there.
+SEED_SPEED_SHARE = 0.5
 
 
 def _motion(log: RampLog, V: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -95,7 +98,7 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     # A weak ridge towards params0 holds the scale where only cruising (a = 0, just the ratio) is seen.
     prior = np.array([params.force_gain, params.Beq])
     scale = np.sqrt(np.mean(A**2, axis=0)) + 1e-12
-    use = speed >= np.quantile(speed, 1.0 - SEED_FRACTION)
+    use = speed >= max(np.quantile(speed, 1.0 - SEED_FRACTION), SEED_SPEED_SHARE * np.quantile(speed, 0.995))
     solution = prior
     for _ in range(6):
         ridge = 1e-3 * np.count_nonzero(use)
@@ -152,7 +155,8 @@ def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
 
 def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParameters:
     """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs,
-    and ``B`` and ``v2`` where they show the slip region (:func:`slip_region`).
+    and ``B`` and ``v2`` where they show the slip region (:func:`slip_region`; ``F2`` then at least the
+    force the cart slid under, :func:`slipping_force`).
 
     What the logs cannot show keeps ``params0``'s value; logs with the pendulum keep ``params0``.
     """
@@ -175,7 +179,43 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
         slip = slip_region(logs, params0.with_values(force_gain=gain, Beq=values["Beq"]))
         if slip is not None:
             values.update(B=slip[0], v2=slip[1], v1=min(params0.v1, 0.5 * slip[1]))
+            # F2 at least the force the cart slid under (a start below it leaves the slip region too early).
+            pushed = slipping_force(logs, params0.with_values(force_gain=gain, Beq=values["Beq"]), slip[0], slip[1])
+            if pushed is not None:
+                values["F2"] = max(values.get("F2", params0.F2), pushed)
     return params0.with_values(**values)
+
+
+def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:
+    """Over the logs (without the smoothing's edges): the speed ``|v|``, the friction each sample needed
+    against its motion ``R = gain*(K*V - b*v) - Beq*v - Mc*a`` (signed along ``v``), the motor's force
+    ``|gain*(K*V - b*v)|`` and the inertia's ``|Mc*a|``."""
+    from pendulab.calibration.extract import motor_constants
+
+    K, b = motor_constants(params.with_values(force_gain=1.0))
+    Mc = params.lumped_cart_mass
+    out: list[list[np.ndarray]] = [[], [], [], []]
+    for log in logs:
+        v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
+        edge = max(5, int(round(SMOOTHING / log.period)))
+        keep = slice(edge, len(log) - edge)
+        motor = params.force_gain * (K * V - b * v)
+        for column, values in zip(out, (np.abs(v), (motor - params.Beq * v - Mc * a) * np.sign(v), np.abs(motor), np.abs(Mc * a))):
+            column.append(values[keep])
+    return tuple(np.concatenate(column) for column in out)
+
+
+def slipping_force(logs: Sequence[RampLog], params: PlantParameters, B: float, v2: float) -> float | None:
+    """The largest motor force (its 98th percentile) the cart slid under in the slip region (drag ``B``
+    below ``v2``): a lower bound of ``F2``, since the slip region ends where the motor's force passes it.
+    None where fewer than 20 samples slid there."""
+    v, R, motor, inertia = _friction_needed(logs, params)
+    # Sliding steadily (the inertia a tenth of the drive at most) with the slip region's drag, within a factor 2.
+    slipping = (v > max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)) & (v < v2) & (R > 0.5 * B * v) & (R < 2.0 * B * v)
+    slipping &= inertia <= 0.1 * motor
+    if np.count_nonzero(slipping) < 20:
+        return None
+    return float(np.quantile(motor[slipping], 0.9))
 
 
 #: Speed bands (quantiles of the moving samples) in which the slip drag is read.
@@ -194,17 +234,8 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     """
     from pendulab.calibration.extract import motor_constants
 
-    K, b = motor_constants(params.with_values(force_gain=1.0))
-    Mc = params.lumped_cart_mass
-    v_all, R_all = [], []
-    for log in logs:
-        v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
-        edge = max(5, int(round(SMOOTHING / log.period)))
-        keep = slice(edge, len(log) - edge)
-        R = params.force_gain * (K * V - b * v) - params.Beq * v - Mc * a
-        v_all.append(v[keep])
-        R_all.append((R * np.sign(v))[keep])
-    v, R = np.abs(np.concatenate(v_all)), np.concatenate(R_all)
+    _, b = motor_constants(params.with_values(force_gain=1.0))
+    v, R, *_ = _friction_needed(logs, params)
     moving = v > max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)
     if np.count_nonzero(moving) < 10 * SLIP_BANDS:
         return None
