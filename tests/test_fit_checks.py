@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import re
 
 import numpy as np
 import pytest
@@ -107,6 +108,9 @@ def test_a_fit_that_cannot_reproduce_the_log_exits_3_and_writes_no_calibration(c
     assert status == 3
     assert err.count("\n") == 1 and "do not reproduce the logs" in err and "no calibration written" in err
     assert "forward simulation" in text and not out.exists()
+    # It says where: the log, the time and the signal the replay misses worst.
+    where = re.search(r"worst in (\S+) around t = ([\d.]+) s: the cart position x off by [\d.]+ mm RMS", err)
+    assert where and where.group(1).endswith("ramp_5s.csv") and 0.0 <= float(where.group(2)) <= 5.0, err
 
 
 def test_a_constant_voltage_cannot_identify_the_parameters(capsys, tmp_path):

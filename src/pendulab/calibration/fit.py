@@ -207,6 +207,35 @@ class FitResult:
         """The forward simulation reproduces the logs (RMS within :attr:`forward_limit`)."""
         return bool(math.isfinite(self.forward_rms) and self.forward_rms <= self.forward_limit)
 
+    def where_it_misses(self, window: float = 0.5) -> str:
+        """Where the forward simulation misses the logs worst: the log, the time, the signal and its error there.
+
+        The cart's position is what the check compares; its error's RMS over ``window`` seconds is largest
+        around the time named (a replay that diverged is named where it did).
+
+        Examples
+        --------
+        >>> t = np.arange(0.0, 4.0, 1e-3)
+        >>> x = np.zeros_like(t)
+        >>> curve = FitCurve("ramp.csv", t, np.full_like(t, 1.5), x, x, np.where((t > 2.0) & (t < 2.5), 3e-3, 0.0))
+        >>> FitResult(("F1",), {}, {}, {}, 0.0, None, 0, 0, 0, True, "", 0.0, curves=(curve,)).where_it_misses()
+        'worst in ramp.csv around t = 2.25 s: the cart position x off by 3 mm RMS over 0.5 s (at 1.5 V)'
+        """
+        worst: tuple[float, str] | None = None
+        for c in self.curves:
+            error = c.x_simulated - c.x_measured
+            bad = np.flatnonzero(~np.isfinite(error))
+            if bad.size:
+                return f"in {c.source}: the replay diverges at t = {c.t[bad[0]]:.2f} s (the cart position x; at {c.V[bad[0]]:.2g} V)"
+            n = min(error.size, max(1, int(round(window / max(float(np.median(np.diff(c.t))), 1e-9)))))
+            running = np.sqrt(np.convolve(error**2, np.ones(n) / n, mode="valid"))
+            k = int(np.argmax(running))
+            middle = k + n // 2
+            if worst is None or running[k] > worst[0]:
+                worst = (float(running[k]), f"worst in {c.source} around t = {c.t[middle]:.2f} s: the cart position x off by "
+                         f"{running[k] * 1e3:.2g} mm RMS over {window:g} s (at {c.V[middle]:.2g} V)")
+        return worst[1] if worst else "no log to compare"
+
     def to_calibration(self, **metadata: Any) -> Calibration:
         """A calibration file's content: the full friction vector (fitted or kept) and the fitted extras.
 

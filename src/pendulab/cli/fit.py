@@ -82,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"plot written to {plot}")
         raise FitRejected(
             f"the fitted values do not reproduce the logs: a forward simulation misses them by {result.forward_rms * 1e3:.3g} mm RMS "
-            f"({result.forward_rms / max(result.encoder_step, 1e-12):.0f} encoder steps; accepted up to {result.forward_limit * 1e3:.3g} mm); "
+            f"({result.forward_rms / max(result.encoder_step, 1e-12):.0f} encoder steps; accepted up to {result.forward_limit * 1e3:.3g} mm), "
+            f"{result.where_it_misses()}; "
             "no calibration written. Check the logs (units, --pendulum, the voltage column is the applied voltage), "
             "give longer or richer logs (ramps in both directions, steps), or start from --calibration"
         )
