@@ -205,13 +205,19 @@ def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[
     return tuple(np.concatenate(column) for column in out)
 
 
+def _sliding_speed(params: PlantParameters) -> float:
+    """The speed (m/s) above which a sample slides for the slip region's reading: faster than the encoder's
+    quantization can fake through the smoothing window."""
+    return max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)
+
+
 def slipping_force(logs: Sequence[RampLog], params: PlantParameters, B: float, v2: float) -> float | None:
-    """The largest motor force (its 98th percentile) the cart slid under in the slip region (drag ``B``
+    """The largest motor force (its 90th percentile) the cart slid under in the slip region (drag ``B``
     below ``v2``): a lower bound of ``F2``, since the slip region ends where the motor's force passes it.
     None where fewer than 20 samples slid there."""
     v, R, motor, inertia = _friction_needed(logs, params)
     # Sliding steadily (the inertia a tenth of the drive at most) with the slip region's drag, within a factor 2.
-    slipping = (v > max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)) & (v < v2) & (R > 0.5 * B * v) & (R < 2.0 * B * v)
+    slipping = (v > _sliding_speed(params)) & (v < v2) & (R > 0.5 * B * v) & (R < 2.0 * B * v)
     slipping &= inertia <= 0.1 * motor
     if np.count_nonzero(slipping) < 20:
         return None
@@ -236,7 +242,7 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
 
     _, b = motor_constants(params.with_values(force_gain=1.0))
     v, R, *_ = _friction_needed(logs, params)
-    moving = v > max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)
+    moving = v > _sliding_speed(params)
     if np.count_nonzero(moving) < 10 * SLIP_BANDS:
         return None
     v, R = v[moving], R[moving]
