@@ -70,7 +70,7 @@ def run_case(case) -> dict:
         row.update(accepted=False, refused=str(exc), cpu=time.process_time() - cpu, wall=time.perf_counter() - wall)
         return row
     row.update(cpu=time.process_time() - cpu, wall=time.perf_counter() - wall, accepted=result.forward_ok, restarts=result.restarts,
-               steps=result.forward_rms / true.q_x, errors={}, status={}, z={}, values=dict(result.values), sigma=dict(result.uncertainty))
+               steps=result.forward_rms / true.q_x, errors={}, status={}, z={}, values=dict(result.values), sigma=dict(result.uncertainty), allowed=dict(result.allowed))
     for n in result.names:
         value = getattr(true, n)
         row["errors"][n] = result.values[n] / value - 1

@@ -54,6 +54,9 @@ def test_corpus_case_is_accepted_and_honest(name):
     for parameter, status in row["status"].items():
         if status == "determined":
             assert row["z"][parameter] <= 3.0, (parameter, row["errors"][parameter], row["z"][parameter])
+    # The stick speed is only ever bounded, within a range that holds the truth (fit.V1_SCATTER).
+    low, high = row["allowed"]["v1"]
+    assert row["status"]["v1"] != "determined" and low < case.params.v1 < high, (row["status"]["v1"], low, high)
     if CASES[name]:  # the bar's other points, with room (measured: see CASES)
         e, s = row["errors"], row["status"]
         assert row["steps"] <= 2.0 and abs(e["Beq"]) <= 0.05 and abs(e["force_gain"]) <= 0.05, bench.line(row)

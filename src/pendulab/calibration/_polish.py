@@ -579,15 +579,15 @@ def refine_pairs(
     return theta, cost
 
 
-#: Each friction threshold's partner in the law: the cart re-sticks below ``v1`` only under ``F1`` of drive,
-#: and leaves the slip region at ``F2`` of drive or at ``v2`` of speed, whichever comes first. One moved
-#: alone shifts such events; its partner moved with it puts them back, so the replay's cost runs in a
-#: narrow valley along the pair (on the unseen rig's calibrate ramp test, ``v2`` 5 % off and ``F2`` 0.5 %
-#: replayed as well as the truth, each alone 20000 times worse). :func:`valley` follows it.
-PARTNERS = {"F1": "v1", "v1": "F1", "F2": "v2", "v2": "F2"}
-#: How far (log) a partner is scanned: a force finely, a speed widely (along the slip region's corner
-#: 1 % of ``F2`` is worth about 12 % of ``v2``).
-PARTNER_SPANS = {"F1": 0.03, "F2": 0.03, "v1": 0.3, "v2": 0.3}
+#: The slip region's corner: the cart leaves the slip region at ``F2`` of drive or at ``v2`` of speed,
+#: whichever comes first. One moved alone shifts every such exit; the other moved with it puts them back,
+#: so the replay's cost runs in a narrow valley along the pair (on the unseen rig's calibrate ramp test,
+#: ``v2`` 5 % off and ``F2`` 0.5 % replayed as well as the truth, each alone 20000 times worse).
+#: :func:`valley` follows it.
+PARTNERS = {"F2": "v2", "v2": "F2"}
+#: How far (log) a partner is scanned: a force finely, a speed widely (along the corner 1 % of ``F2`` is
+#: worth about 12 % of ``v2``).
+PARTNER_SPANS = {"F2": 0.03, "v2": 0.3}
 
 
 def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: Sequence[str], coarse: int = 16, fine: int = 8) -> tuple[np.ndarray, np.ndarray]:
@@ -643,33 +643,6 @@ def walk(logs: list[Anchors], space: Space, theta: np.ndarray, along: str = "v2"
     c, T = valley(logs, space, rows, [along] * len(rows))
     best = int(np.argmin(c))
     return (T[best], float(c[best])) if c[best] < cost else (theta, cost)
-
-
-#: Parameters whose profile polishes all the others at each offset (the profile likelihood proper). The stick
-#: speed shows only in the creep of a stopping cart from ``v1`` to rest, ``Mc v1 / (B + Beq + ...)``, an encoder
-#: step or two on a rig of strong drag, which small moves of all the others put back: on the unseen rig's
-#: calibrate ramp test ``v1`` 21 % low was "determined" to 3 % by the move alone, but with the others polished
-#: ``v1`` 10 % higher replays better than the answer and 30 % higher nearly as well (the truth lies there).
-REOPTIMIZED = ("v1",)
-#: The log-offset (up, then down) where they are polished. Allowed there one way, the profile's next offset is
-#: its half-width, at least 35 %: more than MAX_RELATIVE_SIGMA, so only bounded (so nothing further is polished).
-REOPTIMIZED_OFFSET = 0.1
-
-
-def held(logs: list[Anchors], space: Space, theta: np.ndarray, j: int, value: float, max_iter: int = 6) -> tuple[float, np.ndarray]:
-    """The replay cost with parameter ``j`` held at ``value`` (scaled) and the others polished from ``theta``, and that point.
-
-    A short :func:`polish` (one parameter at a time, radius 1 % down to 0.1 %, at most ``max_iter``
-    batched replays of ``2 (n - 1) + 1`` parameter sets).
-    """
-    keep = [i for i in range(len(theta)) if i != j]
-    prior = None if space.prior is None else (space.prior[0][keep], space.prior[1])
-    sub = Space(space.params0.with_values(**{space.names[j]: value * space.scales[j]}), tuple(space.names[i] for i in keep),
-                space.scales[keep], space.lower[keep], space.upper[keep], prior)
-    found = polish(logs, sub, theta[keep], max_iter=max_iter, first_step=0.01, scan=(), pairs=())
-    point = theta.copy()
-    point[keep], point[j] = found.theta, value
-    return found.cost + (0.0 if space.prior is None else space.prior[1] * (value - space.prior[0][j]) ** 2), point
 
 
 # ---------------------------------------------------------------------- what the replay says back
@@ -751,11 +724,9 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     direction that the cost does not bound both ways leaves none of its parameters determined: a slow
     log that never shows the inertia cannot tell the force gain from a common scale of everything.
 
-    A threshold of :data:`PARTNERS` counts, from the first offset where its move alone rises above the
-    threshold and outwards while it stays below, the move with its partner's best value (:func:`valley`);
-    one of :data:`REOPTIMIZED` counts the move with all the others polished (:func:`held`) at
-    :data:`REOPTIMIZED_OFFSET` either way (allowed there, the nearer offsets are too). Uncertain by more than
-    :data:`MAX_RELATIVE_SIGMA` of its value, a parameter is only bounded.
+    ``F2`` and ``v2`` (:data:`PARTNERS`) count, from the first offset where the move alone rises above the
+    threshold and outwards while it stays below, the move with the other's best value (:func:`valley`).
+    Uncertain by more than :data:`MAX_RELATIVE_SIGMA` of its value, a parameter is only bounded.
     """
     n = len(theta)
     offsets = np.array(PROFILE_OFFSETS)
@@ -780,7 +751,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     # their autocorrelation shows (a threshold crossed or not shifts a whole stretch).
     threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
     m = len(offsets)
-    # A threshold moved alone leaves its valley (see PARTNERS): from the first offset where the move alone
+    # F2 or v2 moved alone leaves the corner's valley (see PARTNERS): from the first offset where the move alone
     # rises above the threshold, the move with the partner's best value counts too, offset by offset while
     # that stays below (all such chains in one batched replay per round).
     chains = []
@@ -791,16 +762,6 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
                 above = np.flatnonzero(costs[first : first + m] > cost0 + threshold)
                 if above.size:
                     chains.append((j, first + int(above[0]), first + m))
-    i = int(np.searchsorted(offsets, REOPTIMIZED_OFFSET))
-    for j, name in enumerate(space.names):
-        firsts = [1 + 2 * j * m + side * m for side in range(2)]
-        if name not in REOPTIMIZED or any(costs[first + i] <= cost0 + threshold for first in firsts):
-            continue
-        for first, sign in zip(firsts, (1.0, -1.0)):
-            c, _ = held(logs, space, theta, j, theta[j] * math.exp(sign * REOPTIMIZED_OFFSET))
-            if c <= cost0 + threshold:  # allowed that far one way: no more is needed to call it only bounded
-                costs[first : first + i + 1] = np.minimum(costs[first : first + i + 1], c)  # the nearer offsets as well
-                break
     while chains:
         found, _ = valley(logs, space, np.array([trials[i] for _, i, _ in chains]), [space.names[j] for j, _, _ in chains])
         costs[[i for _, i, _ in chains]] = np.minimum(costs[[i for _, i, _ in chains]], found)
