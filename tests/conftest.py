@@ -59,11 +59,12 @@ RAMP_FIT_FILES = frozenset({"test_fit.py", "test_fit_checks.py"})
 
 #: The order in which pytest-xdist hands out its work units (a file, or a group above), as the collection gives them:
 #: the real-time group first (300 s on 2 cores, one test after the other) beside the short files, then the minute-long
-#: fits, longest first (test_fit_shapes 210 s, the ramp fit's group 170, test_fit_corpus 150, test_calibration_cli 73).
+#: fits, longest first (test_fit_shapes 210 s, the ramp fit's group 170, test_fit_corpus 150, test_calibration_cli 73,
+#: test_fit_valleys 40: its replays beside the real-time group made `calibrate --port` fail all three times).
 #: A fit beside a real-time test makes the rig's answers late: with the fits first, `calibrate --port` failed all three
 #: times (45 of 1000 answers late). xdist's own order, by the number of tests, put test_calibration_cli's fit early.
 FIRST = ("realtime",)
-LAST = ("test_fit_shapes.py", "ramp_test_fit", "test_fit_corpus.py", "test_calibration_cli.py")
+LAST = ("test_fit_shapes.py", "ramp_test_fit", "test_fit_corpus.py", "test_calibration_cli.py", "test_fit_valleys.py")
 
 
 def work_unit(path: Path) -> str:
