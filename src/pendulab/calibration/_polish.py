@@ -582,7 +582,7 @@ def refine_pairs(
 #: The slip region's corner: the cart leaves the slip region at ``F2`` of drive or at ``v2`` of speed,
 #: whichever comes first. One moved alone shifts every such exit; the other moved with it puts them back,
 #: so the replay's cost runs in a narrow valley along the pair (on the unseen rig's calibrate ramp test,
-#: ``v2`` 5 % off and ``F2`` 0.5 % replayed as well as the truth, each alone 20000 times worse).
+#: ``v2`` 5 % off and ``F2`` 0.5 % replayed as well as the truth, either one moved alone to the truth's value 600 times worse).
 #: :func:`valley` follows it.
 PARTNERS = {"F2": "v2", "v2": "F2"}
 #: How far (log) a partner is scanned: a force finely, a speed widely (along the corner 1 % of ``F2`` is

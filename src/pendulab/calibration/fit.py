@@ -422,7 +422,7 @@ SCAN_GAIN = 0.02
 #: The stick speed ``v1`` is reported bounded, never determined, within its profile's range widened by this
 #: factor either way. It shows only in how a stopping cart creeps once slower than ``v1`` (with ``Beq`` alone
 #: as its drag, SPEC §2), and small moves of the other parameters make up for it: over the corpus's fits
-#: where the profile called ``v1`` determined, 7 of 18 were 10 to 21 % off (the unseen rig's calibrate ramp
+#: where the profile called ``v1`` determined, 7 of 20 were 10 to 21 % off (the unseen rig's calibrate ramp
 #: test: 21 % low, "determined" to 3 %, and the truth's ``v1`` with the others polished replayed as well).
 V1_SCATTER = 1.3
 #: At most this many walks along the valley of v2 and F2 (:func:`_polish.walk`), each then polished, while one lowers the cost by WALK_GAIN (one finds most of it: on the unseen rig's calibrate ramp test the cost fell 2.5-fold, a second walk took 9 % more).
