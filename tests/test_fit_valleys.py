@@ -66,11 +66,11 @@ def test_a_threshold_moved_alone_leaves_its_valley_and_its_partner_puts_it_back(
 def test_a_walk_along_the_valley_goes_where_its_floor_falls(ramp, on_the_valley):
     anchors, space, truth = ramp
     _, found, start = on_the_valley
-    theta, walked = _polish.walk(anchors, space, start)
+    theta, walked = _polish.walk(anchors, space, start, found)
     assert math.isclose(walked, cost(anchors, space, theta))
     # Along the floor, down to as good as the truth (measured: 6.4 times lower, 0.91 of the truth's cost).
     assert walked < found / 4 and walked < 1.25 * cost(anchors, space, truth)
     assert abs(value(space, theta, "v2") / TRUE.v2 - 1) < 0.025  # from +5 % (measured -1.1 %)
     # A point already at the valley's lowest comes back unchanged.
-    again, cost_again = _polish.walk(anchors, space, theta)
+    again, cost_again = _polish.walk(anchors, space, theta, walked)
     assert cost_again <= walked

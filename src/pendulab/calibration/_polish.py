@@ -627,20 +627,18 @@ def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: S
 WALK_OFFSETS = (-0.1, -0.06, -0.03, 0.03, 0.06, 0.1)
 
 
-def walk(logs: list[Anchors], space: Space, theta: np.ndarray, along: str = "v2") -> tuple[np.ndarray, float]:
-    """Along the valley of ``along`` and its partner (:func:`valley`): the best of :data:`WALK_OFFSETS`.
+def walk(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float) -> tuple[np.ndarray, float]:
+    """Along the slip region's corner from ``theta`` (of replay cost ``cost``): the best of :data:`WALK_OFFSETS`
+    of ``v2``, each with its best ``F2`` (:func:`valley`).
 
-    A pattern search stops anywhere on such a valley's floor (each of its moves leaves it); the floor
-    may fall away from there. Returns the best point and its cost (the start's, if none is lower).
+    A pattern search stops anywhere on the corner's valley floor (each of its moves leaves it); the floor
+    may fall away from there. Returns the best point and its cost (``theta`` and ``cost`` if none is lower).
     """
-    r = space.residuals(logs, theta[None])[0]
-    cost = float(r @ r)
-    if along not in space.names or PARTNERS[along] not in space.names:
+    if "v2" not in space.names or "F2" not in space.names:
         return theta, cost
-    j = space.names.index(along)
     rows = np.tile(theta, (len(WALK_OFFSETS), 1))
-    rows[:, j] *= np.exp(np.array(WALK_OFFSETS))
-    c, T = valley(logs, space, rows, [along] * len(rows))
+    rows[:, space.names.index("v2")] *= np.exp(np.array(WALK_OFFSETS))
+    c, T = valley(logs, space, rows, ["v2"] * len(rows))
     best = int(np.argmin(c))
     return (T[best], float(c[best])) if c[best] < cost else (theta, cost)
 

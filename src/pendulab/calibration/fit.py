@@ -425,8 +425,8 @@ SCAN_GAIN = 0.02
 #: where the profile called ``v1`` determined, 7 of 20 were 10 to 21 % off (the unseen rig's calibrate ramp
 #: test: 21 % low, "determined" to 3 %, and the truth's ``v1`` with the others polished replayed as well).
 V1_SCATTER = 1.3
-#: At most this many walks along the valley of v2 and F2 (:func:`_polish.walk`), each then polished, while one lowers the cost by WALK_GAIN (one finds most of it: on the unseen rig's calibrate ramp test the cost fell 2.5-fold, a second walk took 9 % more).
-WALK_ROUNDS = 1
+#: One walk along the valley of v2 and F2 (:func:`_polish.walk`), polished from where it ends if it lowers the cost by
+#: this share (one finds most of it: on the unseen rig's calibrate ramp test the cost fell 2.5-fold, a second walk took 9 % more).
 WALK_GAIN = 0.01
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
 POLISH_WORK = 1.4e7
@@ -816,13 +816,11 @@ def _polished(setup: _Setup, candidate: _Candidate, scans: bool = True) -> _Answ
             break
         result = result.then(_polish.polish(searched, space, scanned.theta, max_iter=polish_iter, scan=()), replays=scanned.replays)
         setup.progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
-    for _ in range(WALK_ROUNDS):
-        # Along the slip region's corner (v2 with its best F2): a valley the pattern search stops anywhere on,
-        # whatever the cost (on the unseen rig's calibrate ramp test it stopped at 1.6 encoder steps with v2
-        # 5.7 % off; along the valley lies the truth's 1.0).
-        theta, cost = _polish.walk(searched, space, result.theta)
-        if cost >= (1 - WALK_GAIN) * result.cost:
-            break
+    # Along the slip region's corner (v2 with its best F2): a valley the pattern search stops anywhere on,
+    # whatever the cost (on the unseen rig's calibrate ramp test it stopped at 1.6 encoder steps with v2
+    # 5.7 % off; along the valley lies the truth's 1.0).
+    theta, cost = _polish.walk(searched, space, result.theta, result.cost)
+    if cost < (1 - WALK_GAIN) * result.cost:
         result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=2)
         setup.progress(f"along the valley of v2 and F2, and the polish: cost {result.cost:.4g}")
     if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
