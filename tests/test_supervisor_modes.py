@@ -172,3 +172,23 @@ def test_simulate_cli_prints_and_records_the_mode_events(capsys, tmp_path):
     assert 0 < metrics["catch_time_s"] < 8 and run["reference"].size == run["t"].size
     assert list(run["meta"].mode_events) and run["meta"].start == "hanging"
     assert json.loads(run["meta"].run)["supervisor"]["swing_up"] is True
+
+
+def test_with_recentring_a_drift_counts_only_where_recentring_engages():
+    from pendulab.analysis.verdict import Limits, _cart_and_margin_warnings  # private: the drift rule itself
+
+    t = np.linspace(0.0, 3.0, 3001)
+    limits = Limits()
+
+    def drift(x_end: float, speed: float, recentre: bool) -> bool:
+        x = x_end + speed * (t - t[-1])
+        return any(w.kind == "drift" for w in _cart_and_margin_warnings(t, None, x, limits, {}, recentre=recentre))
+
+    # Near the centre, moving: nothing holds it without re-centring; with it, re-centring engages further out.
+    assert drift(0.003, -0.039, recentre=False)
+    assert not drift(0.003, -0.039, recentre=True)
+    # Beyond where re-centring engages and still moving out: re-centring does not hold it.
+    assert drift(limits.recentre_x_on + 0.01, 0.039, recentre=True)
+    # The supervisor's own start value of the band counts.
+    assert drift(0.03, 0.039, recentre=False) and not drift(0.03, 0.039, recentre=True)
+    assert Limits.of(None, {"recentre_x_on": 0.02}).recentre_x_on == 0.02
