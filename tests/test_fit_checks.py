@@ -168,7 +168,7 @@ def test_a_bad_old_lab_folder_is_one_line_exit_2(capsys, tmp_path):
 def test_an_answer_that_misses_the_logs_reports_nothing_determined():
     # Issue 19: on a slow-ramp log the search stopped where B had folded into Beq (Beq +780 %, replay 4.5
     # encoder steps) and the profile around that point called Beq determined to a few per cent.
-    from pendulab.calibration.fit import CONFIDENT_STEPS, ESCAPED_GAIN, FitResult, confidence_of
+    from pendulab.calibration.fit import CONFIDENT_STEPS, FitResult, confidence_of
 
     q = TRUE.q_x
     found = ("determined", "determined", "bounded", "not identified")
@@ -178,12 +178,6 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
     status, out, note = confidence_of(found, sigma, 1.5 * CONFIDENT_STEPS * q, q)
     assert status == ("bounded", "bounded", "bounded", "not identified") and np.all(np.isinf(out))
     assert f"misses the logs by {1.5 * CONFIDENT_STEPS:.1f} encoder steps" in note and "--start" in note
-    # Replays well, but the evolution strategy found a cost far below where the local searches stopped: their basins
-    # are narrow enough that the profile's own may be one more (the sticky rig's chirp, 2.31 -> 1.62 steps).
-    status, out, note = confidence_of(found, sigma, 0.5 * CONFIDENT_STEPS * q, q, escaped=1.01 * ESCAPED_GAIN)
-    assert status == ("bounded", "bounded", "bounded", "not identified") and np.all(np.isinf(out))
-    assert f"found a {1.01 * ESCAPED_GAIN:.1f} times lower replay cost" in note and "--start" in note
-    assert confidence_of(found, sigma, 0.5 * CONFIDENT_STEPS * q, q, escaped=0.99 * ESCAPED_GAIN)[0] == found
     # The calibration file and the summary carry the reason.
     params = PlantParameters.preset("none")
     result = FitResult(

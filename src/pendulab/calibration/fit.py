@@ -437,8 +437,6 @@ WALK_GAIN = 0.01
 #: seeds found 0.9-1.6 steps (the truth: 0.97), one none lower (15 CPU-s each).
 EVOLVE_ABOVE_STEPS = 1.5
 EVOLVE_SEEDS = (19, 20)
-#: Where the evolution strategy lowers the cost more than this many times, nothing is reported determined (:func:`confidence_of`).
-ESCAPED_GAIN = 1.5
 #: Batched replays of one :func:`_polish.evolve`.
 EVOLVE_REPLAYS = _polish.EVOLVE_GENERATIONS
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
@@ -614,7 +612,6 @@ class _Answer:
     searched: list[_polish.Anchors]  # what the polish replayed (pieces of long logs; the chosen voltage)
     replays: list[_polish.Anchors]  # the whole logs, with the chosen voltage
     rms: float  # replay RMS over the whole logs (m)
-    escaped: float = 1.0  # how many times lower the evolution strategy found the cost than the local searches left it
 
 
 def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEstimate]) -> list[_polish.Anchors]:
@@ -882,7 +879,7 @@ def _evolved(setup: _Setup, answer: _Answer) -> _Answer:
         return answer
     rms = _replay_rms(setup, answer.replays, result.theta)
     setup.progress(f"the evolution strategy around the answer, and the polish: cost {answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
-    return _Answer(answer.candidate, result, searched, answer.replays, rms, answer.polished.cost / max(result.cost, 1e-300))
+    return _Answer(answer.candidate, result, searched, answer.replays, rms)
 
 
 def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: float) -> FitResult:
@@ -950,7 +947,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
 
-    status, uncertainty, confidence = confidence_of(status, uncertainty, forward_rms, setup.step, answer.escaped)
+    status, uncertainty, confidence = confidence_of(status, uncertainty, forward_rms, setup.step)
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, allowed_scaled, scales)}
     status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
     confidence = "; ".join(note for note in (confidence, regime_note) if note)
@@ -1138,7 +1135,7 @@ def fit_parameters(
 
 
 def confidence_of(
-    status: Sequence[str], sigma: np.ndarray, forward_rms: float, step: float, escaped: float = 1.0
+    status: Sequence[str], sigma: np.ndarray, forward_rms: float, step: float
 ) -> tuple[tuple[str, ...], np.ndarray, str]:
     """What may be claimed of the answer, given how well it replays the logs.
 
@@ -1152,20 +1149,13 @@ def confidence_of(
         RMS position error of the forward simulation of the whole logs with the answer (m).
     step : float
         The cart encoder's step (m).
-    escaped : float
-        How many times lower the evolution strategy found the replay cost than the local searches had left
-        it (1: it did not run, or found nothing lower).
 
     Returns
     -------
     status, sigma, note
-        Unchanged, with an empty note, when the replay is within :data:`CONFIDENT_STEPS` encoder steps and
-        the evolution strategy did not escape the local searches' answer by more than :data:`ESCAPED_GAIN`.
+        Unchanged, with an empty note, when the replay is within :data:`CONFIDENT_STEPS` encoder steps.
         Otherwise every "determined" becomes "bounded" with no uncertainty, and the note says why: a
-        profile around a point that misses the logs says nothing about where the logs' own answer lies, and
-        where the local searches stopped in a basin far above another, the profile (local too) may sit in
-        one more such basin (the sticky rig's chirp: the strategy took 2.31 encoder steps to 1.62, and the
-        profile there called F1, F2, v2 and B determined, each more than 3 sigmas off; the truth replays at 0.97).
+        profile around a point that misses the logs says nothing about where the logs' own answer lies.
 
     Examples
     --------
@@ -1181,19 +1171,14 @@ def confidence_of(
     from pendulab.calibration import _polish
 
     steps = forward_rms / max(step, 1e-6)
-    if steps <= CONFIDENT_STEPS and escaped <= ESCAPED_GAIN:
+    if steps <= CONFIDENT_STEPS:
         return tuple(status), np.asarray(sigma, dtype=float), ""
     demoted = tuple(_polish.BOUNDED if s == _polish.DETERMINED else s for s in status)
     sigma = np.where([s == _polish.DETERMINED for s in status], math.inf, np.asarray(sigma, dtype=float))
-    why = (
-        f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within about 2): "
-        "the search may have stopped in a wrong basin" if steps > CONFIDENT_STEPS else
-        f"the local searches stopped where the evolution strategy found a {escaped:.1f} times lower replay cost: this log's "
-        "replay has basins that a profile around the answer does not see"
-    )
     note = (
-        f"{why}, so no parameter is reported determined and none gets an uncertainty; fit again with another --start, "
-        f"or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
+        f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
+        f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
+        f"an uncertainty; fit again with another --start, or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
     )
     return demoted, sigma, note
 
