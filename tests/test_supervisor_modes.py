@@ -180,7 +180,7 @@ def test_with_recentring_a_drift_counts_only_where_recentring_engages():
     t = np.linspace(0.0, 3.0, 3001)
     limits = Limits()
 
-    def drift(x_end: float, speed: float, recentre: bool) -> bool:
+    def drift(x_end: float, speed: float, recentre: bool, limits: Limits = limits) -> bool:
         x = x_end + speed * (t - t[-1])
         return any(w.kind == "drift" for w in _cart_and_margin_warnings(t, None, x, limits, {}, recentre=recentre))
 
@@ -189,6 +189,7 @@ def test_with_recentring_a_drift_counts_only_where_recentring_engages():
     assert not drift(0.003, -0.039, recentre=True)
     # Beyond where re-centring engages and still moving out: re-centring does not hold it.
     assert drift(limits.recentre_x_on + 0.01, 0.039, recentre=True)
-    # The supervisor's own start value of the band counts.
+    # The supervisor's own start value of the band counts: 3 cm out is inside the default band, beyond a 2 cm one.
     assert drift(0.03, 0.039, recentre=False) and not drift(0.03, 0.039, recentre=True)
-    assert Limits.of(None, {"recentre_x_on": 0.02}).recentre_x_on == 0.02
+    narrow = Limits.of(None, {"recentre_x_on": 0.02})
+    assert narrow.recentre_x_on == 0.02 and drift(0.03, 0.039, recentre=True, limits=narrow)
