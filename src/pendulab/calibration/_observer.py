@@ -56,13 +56,20 @@ class Observed:
     others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the fit chooses among them on a narrower observer)
 
 
-def observer_gain(omega: float, period: float, zeta: float = ZETA) -> np.ndarray:
-    """Correction of the state ``(x, xdot, alpha, alphadot)`` per metre of position error, after each sample.
+def observer_gain(omega: float, period: float, zeta: float = ZETA, outputs: int = 1) -> np.ndarray:
+    """Correction of the state ``(x, xdot, alpha, alphadot)`` per unit of output error, after each sample.
 
     The discrete twin of a second-order observer of natural frequency ``omega`` for the cart's position
-    and speed (``2 zeta omega`` and ``omega**2`` per second, times the sample period).
+    and speed (``2 zeta omega`` and ``omega**2`` per second, times the sample period): ``(4,)``. With
+    ``outputs=2`` the same for the angle and its rate, ``(4, 2)``; ``omega`` far above the upright
+    pendulum's own unstable pole (about ``sqrt(g / l)``, 5 rad/s) holds it up.
     """
-    return np.array([2.0 * zeta * omega * period, omega**2 * period, 0.0, 0.0])
+    column = np.array([2.0 * zeta * omega * period, omega**2 * period])
+    if outputs == 1:
+        return np.r_[column, 0.0, 0.0]
+    gain = np.zeros((4, 2))
+    gain[:2, 0], gain[2:, 1] = column, column
+    return gain
 
 
 def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:
@@ -71,9 +78,9 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
     rows = []
     for a in logs:
         period = float(a.t[1] - a.t[0])
-        y = a.measured[:, 0]
-        predicted = observe(vectors, a.V, a.t, y, a.x0, observer_gain(omega, period), free=space.names)
-        rows.append((predicted - y[None, :]) / a.sigma[0])
+        ny = a.measured.shape[1]
+        predicted = observe(vectors, a.V, a.t, a.measured, a.x0, observer_gain(omega, period, outputs=ny), free=space.names)
+        rows.append(((predicted - a.measured[None]) / a.sigma[None, None, :ny]).reshape(len(vectors), -1))
     r = np.nan_to_num(np.concatenate(rows, axis=1), nan=1e6, posinf=1e6, neginf=-1e6)
     if space.prior is None:
         return r

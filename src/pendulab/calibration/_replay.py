@@ -49,12 +49,13 @@ SET_COUNTS = (1, 16, 32)
 
 
 @lru_cache(maxsize=None)
-def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], compile: bool, observer: bool = False) -> ca.Function:
+def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], compile: bool, observer: int = 0) -> ca.Function:
     """One chunk of :data:`CHUNK` samples for ``n_sets`` parameter sets, compiled to C where it can be.
 
     The replay: ``F(s0[4 x m], V[1 x C], t[1 x C], restart[1 x C], s_restart[4 x C], theta[n_free x m], h)
-    -> states[4 x C*m]``. The observer (``observer=True``, see :func:`observe`): ``F(s0[4 x m], V, t,
-    y[1 x C], gain[4], theta, h) -> (s_end[4 x m], predicted[1 x C*m])``.
+    -> states[4 x C*m]``. The observer of ``observer`` outputs (1: the position; 2: and the angle; see
+    :func:`observe`): ``F(s0[4 x m], V, t, y[ny x C], gain[4 x ny], theta, h) -> (s_end[4 x m],
+    predicted[ny x C*m], corrected[4 x C*m])``.
 
     Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are inputs; the others are
     compiled in as the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
@@ -69,19 +70,22 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
     # MX, so that the chunk stays a loop over the one step in the generated C instead of being unrolled.
     s0, Vc, tc, thc, hc = ca.MX.sym("s0", 4), ca.MX.sym("V", 1, CHUNK), ca.MX.sym("t", 1, CHUNK), ca.MX.sym("theta", len(free)), ca.MX.sym("h")
     if observer:
-        y, gain = ca.SX.sym("y"), ca.SX.sym("gain", 4)
+        ny = observer
+        y, gain = ca.SX.sym("y", ny), ca.SX.sym("gain", 4, ny)
         predicted = step(s, V, p, t, h)
-        one = ca.Function("observe_step", [s, V, t, y, gain, theta, h], [predicted + gain * (y - predicted[0]), predicted[0]])
-        yc, gc = ca.MX.sym("y", 1, CHUNK), ca.MX.sym("gain", 4)
-        states, positions = one.mapaccum("observe_chunk", CHUNK, [0], [0])(s0, Vc, tc, yc, ca.repmat(gc, 1, CHUNK), ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
-        chunk = ca.Function("observe_chunk1", [s0, Vc, tc, yc, gc, thc, hc], [states[:, -1], positions])
+        measured = predicted[[0, 2][:ny]]
+        corrected = predicted + ca.mtimes(gain, y - measured)
+        one = ca.Function("observe_step", [s, V, t, y, gain, theta, h], [corrected, measured, corrected])
+        yc, gc = ca.MX.sym("y", ny, CHUNK), ca.MX.sym("gain", 4, ny)
+        _, positions, states = one.mapaccum("observe_chunk", CHUNK, [0], [0])(s0, Vc, tc, yc, ca.repmat(gc, 1, CHUNK), ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
+        chunk = ca.Function("observe_chunk1", [s0, Vc, tc, yc, gc, thc, hc], [states[:, -1], positions, states])
     else:
         r, sr = ca.SX.sym("r"), ca.SX.sym("sr", 4)
         one = ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
         rc, src = ca.MX.sym("r", 1, CHUNK), ca.MX.sym("sr", 4, CHUNK)
         states = one.mapaccum("replay_chunk", CHUNK)(s0, Vc, tc, rc, src, ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
         chunk = ca.Function("replay_chunk1", [s0, Vc, tc, rc, src, thc, hc], [states])
-    tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed) + (("observer",) if observer else ())).encode()).hexdigest()[:10]
+    tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed) + (("observer", observer, "states") if observer else ())).encode()).hexdigest()[:10]
     name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
     shared = [1, 2, 3, 4, 6]  # everything but the state and the parameters is the same for every set
     if compile and n_sets > 1:
@@ -114,8 +118,8 @@ def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[st
     for period in sorted(set(periods)):
         for m in SET_COUNTS:
             _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True)
-            if m > 1 and params.Mp == 0:  # the cart alone is searched on the observer (pendulab.calibration._observer)
-                _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True, True)
+            if m > 1:  # the fit's search runs on the observer (pendulab.calibration._observer)
+                _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True, 2 if params.Mp > 0 else 1)
 
 
 def prepare_in_background(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> subprocess.Popen | None:
@@ -228,7 +232,8 @@ def replay(
 def observer_compiled(params: PlantParameters, period: float, free: Sequence[str], max_substep: float = MAX_SUBSTEP) -> bool:
     """Whether :func:`observe` runs as compiled C here (else in CasADi's virtual machine, many times slower)."""
     free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
-    return _chunk_function(substeps(period, max_substep), SET_COUNTS[1], free_idx, fixed, True, True).class_name() == "External"
+    outputs = 2 if params.Mp > 0 else 1
+    return _chunk_function(substeps(period, max_substep), SET_COUNTS[1], free_idx, fixed, True, outputs).class_name() == "External"
 
 
 def observe(
@@ -242,14 +247,17 @@ def observe(
     free: Sequence[str] | None = None,
     max_substep: float = MAX_SUBSTEP,
     compile: bool = True,
-) -> np.ndarray:
-    """Positions predicted one sample ahead by an observer of the plant, ``(m, n)``.
+    states: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Outputs predicted one sample ahead by an observer of the plant, ``(m, n)`` (``(m, n, 2)`` for two outputs).
 
-    The replay of :func:`replay`, corrected after each sample towards the logged position ``y[k]``:
-    ``state <- predicted + gain * (y[k] - predicted position)``. A breakaway a millisecond early no
-    longer shifts the rest of the log; each prediction shows only what the model gets wrong within about
-    one observer time constant. ``gain = 0`` is the replay itself. Arguments as :func:`replay`, with
-    ``params`` an array ``(m, n_params)``.
+    The replay of :func:`replay`, corrected after each sample towards the logged outputs ``y[k]`` (the
+    position ``(n,)``, or the position and the angle ``(n, 2)``): ``state <- predicted + gain @ (y[k] -
+    predicted outputs)`` with ``gain`` ``(4,)`` or ``(4, 2)``. A breakaway a millisecond early no longer
+    shifts the rest of the log; each prediction shows only what the model gets wrong within about one
+    observer time constant, and an upright pendulum, open-loop unstable, stays up. ``gain = 0`` is the
+    replay itself. With ``states=True`` the corrected states ``(m, n, 4)`` too (the observer's estimate
+    of the state after each sample). Arguments as :func:`replay`, with ``params`` an array ``(m, n_params)``.
 
     Examples
     --------
@@ -262,42 +270,46 @@ def observe(
     """
     vectors = np.atleast_2d(np.asarray(params, dtype=float))
     m, n = vectors.shape[0], len(V)
+    Y = np.asarray(y, dtype=float).reshape(n, -1)
+    ny = Y.shape[1]
     width = next((w for w in SET_COUNTS[1:] if w >= m), SET_COUNTS[-1])
-    if m > width:
-        return np.concatenate([observe(vectors[i : i + width], V, t, y, x0, gain, free=free, max_substep=max_substep, compile=compile)
-                               for i in range(0, m, width)])
-    if m < width:
-        return observe(np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))]), V, t, y, x0, gain, free=free, max_substep=max_substep, compile=compile)[:m]
+    if m != width:
+        parts = [vectors[i : i + width] for i in range(0, m, width)] if m > width else [np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))])]
+        done = [observe(q, V, t, y, x0, gain, free=free, max_substep=max_substep, compile=compile, states=True) for q in parts]
+        predicted, corrected = np.concatenate([d[0] for d in done])[:m], np.concatenate([d[1] for d in done])[:m]
+        return (predicted, corrected) if states else predicted
     period = float(t[1] - t[0]) if n > 1 else 1e-3
     n_sub = substeps(period, max_substep)
     free_idx, fixed = _split(vectors[0], free)
-    f = _chunk_function(n_sub, m, free_idx, fixed, bool(compile), True)
+    f = _chunk_function(n_sub, m, free_idx, fixed, bool(compile), ny)
     n_chunks = -(-n // CHUNK)
     size = n_chunks * CHUNK
-    Vp, yp = np.zeros(size), np.zeros(size)
-    Vp[:n], yp[:n] = V, y
+    Vp, yp = np.zeros(size), np.zeros((size, ny))
+    Vp[:n], yp[:n] = V, Y
     tp = t[0] + period * np.arange(size)
     tp[:n] = t
-    # In place, as in replay(): column-major (4 x m) is (m, 4) here; the positions (1 x CHUNK*m) are (m, CHUNK).
+    # In place, as in replay(): column-major (4 x m) is (m, 4) here; the outputs (ny x CHUNK*m) are (m, CHUNK, ny).
     state = np.tile(np.asarray(x0, dtype=float), m)
-    V_in, t_in, y_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(CHUNK)
-    g = np.asarray(gain, dtype=float).copy()
+    V_in, t_in, y_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(ny * CHUNK)
+    g = np.asarray(gain, dtype=float).reshape(4, ny).T.ravel().copy()  # column-major (4 x ny)
     P = np.ascontiguousarray(vectors[:, free_idx]).ravel()
     h = np.array([period / n_sub])
-    end, predicted = np.empty(4 * m), np.empty(CHUNK * m)
+    end, predicted, corrected = np.empty(4 * m), np.empty(ny * CHUNK * m), np.empty(4 * CHUNK * m)
     buffer, evaluate = f.buffer()
     for i, a in enumerate((state, V_in, t_in, y_in, g, P, h)):
         buffer.set_arg(i, a.data)
-    buffer.set_res(0, end.data)
-    buffer.set_res(1, predicted.data)
-    out = np.empty((m, size))
+    for i, a in enumerate((end, predicted, corrected)):
+        buffer.set_res(i, a.data)
+    out, estimates = np.empty((m, size, ny)), np.empty((m, size, 4))
     for c in range(n_chunks):
         sl = slice(c * CHUNK, (c + 1) * CHUNK)
-        V_in[:], t_in[:], y_in[:] = Vp[sl], tp[sl], yp[sl]
+        V_in[:], t_in[:], y_in[:] = Vp[sl], tp[sl], yp[sl].ravel()
         evaluate()
-        out[:, sl] = predicted.reshape(m, CHUNK)
+        out[:, sl] = predicted.reshape(m, CHUNK, ny)
+        estimates[:, sl] = corrected.reshape(m, CHUNK, 4)
         state[:] = end
-    return out[:, :n]
+    out = out[:, :n, 0] if np.ndim(y) == 1 else out[:, :n]
+    return (out, estimates[:, :n]) if states else out
 
 
 if __name__ == "__main__":  # prepare_in_background's worker
