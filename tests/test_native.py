@@ -90,7 +90,7 @@ def test_cc_is_honoured_and_a_failing_compiler_falls_back(cache, monkeypatch, tm
 def test_fit_functions_fall_back_to_casadis_virtual_machine(no_compiler, cache):
     import casadi as ca
 
-    from pendulab.calibration._shooting import _compile  # private: the fit's compile step must go through pendulab.native
+    from pendulab.calibration._replay import _compile  # private: the fit's compile step must go through pendulab.native
 
     x = ca.SX.sym("x")
     assert _compile([ca.Function("twice", [x], [2 * x])], "pendulab_test_twice") == (None, False)
@@ -100,7 +100,7 @@ def test_fit_functions_fall_back_to_casadis_virtual_machine(no_compiler, cache):
 def test_fit_functions_compile_through_the_helper(cache):
     import casadi as ca
 
-    from pendulab.calibration._shooting import _compile  # private: the fit's compile step must go through pendulab.native
+    from pendulab.calibration._replay import _compile  # private: the fit's compile step must go through pendulab.native
 
     x = ca.SX.sym("x")
     library, built = _compile([ca.Function("thrice", [x], [3 * x])], "pendulab_test_thrice")

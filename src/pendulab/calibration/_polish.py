@@ -1,9 +1,9 @@
 """The fit's last stage and its check: the logs replayed under the true stick-slip law.
 
-:func:`pendulab.calibration.fit.fit_parameters` first solves a smoothed problem (multiple shooting);
-the smoothing that makes it solvable also biases it. Here the answer is polished on what the fit is
-finally judged by, a replay of every log through the plant with the law's switches as they are
-(:mod:`pendulab.calibration._replay`):
+:func:`pendulab.calibration.fit.fit_parameters` first searches an observer of the replay
+(:mod:`pendulab.calibration._observer`), whose corrections blur what a threshold a per cent off does.
+Here the answer is polished on what the fit is finally judged by, a replay of every log through the
+plant with the law's switches as they are (:mod:`pendulab.calibration._replay`):
 
 * **anchors** (:class:`Anchors`): the replay restarts wherever the log says what the state is: late
   in each rest of the cart (position and speed from a line through the positions there: a stuck cart
@@ -479,7 +479,7 @@ def polish(
     cost = start_cost = float(r @ r)
     radius, replays, it, n = first_step, 1, 0, len(theta)
     # The thresholds first: whether a push breaks the cart away (F1) or slides it freely (F2) is a
-    # jump in the replay, and a smoothed fit's threshold a few per cent off misses whole motions.
+    # jump in the replay, and a search's threshold a few per cent off misses whole motions.
     # A scan along each (coarse, then fine around the best), one batched replay per scan, at the
     # sub-step ``scan_substep`` (each scan holds the current value, so its costs compare among
     # themselves); the answer is kept if the replay at the plant's own sub-step agrees it is better.

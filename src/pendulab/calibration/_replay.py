@@ -11,7 +11,7 @@ every rest judges each motion on its own instead of carrying a millimetre lost i
 the end of the log; an upright pendulum, open-loop unstable, restarts from the fit's state estimate.
 
 The step, wrapped with the restart, is unrolled over a fixed chunk of samples (``mapaccum``), mapped
-over parameter sets and compiled to C once per machine (cached like the shooting functions); a log
+over parameter sets and compiled to C once per machine (cached by :mod:`pendulab.native`); a log
 is replayed chunk by chunk.
 """
 
@@ -20,19 +20,16 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io
-import json
 import os
-import subprocess
-import sys
 from functools import lru_cache
 from typing import Sequence
 
 import casadi as ca
 import numpy as np
 
-from pendulab.calibration._shooting import _compile
 from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
+from pendulab.native import shared_library
 
 # OpenMP threads that finish their parameter sets sleep instead of spinning (set before libgomp starts):
 # on a busy machine a spinning thread takes the core another process needs.
@@ -46,6 +43,16 @@ EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
 CHUNK = 500
 #: Numbers of parameter sets compiled for (each a library built once per machine); others are padded.
 SET_COUNTS = (1, 16, 32)
+
+
+def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1", flags: Sequence[str] = ()) -> tuple[str | None, bool]:
+    """Shared library holding ``functions`` (built once, cached by :func:`pendulab.native.shared_library`)
+    and whether it was built just now; ``(None, False)`` without a working compiler."""
+    gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for f in functions:
+        gen.add(f)
+    library = shared_library(gen.dump(), name, flags=(optimize, *flags), salt=ca.__version__, kind="fit", prebuilt=False)
+    return (str(library.path), library.built) if library else (None, False)
 
 
 @lru_cache(maxsize=None)
@@ -120,22 +127,6 @@ def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[st
             _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True)
             if m > 1:  # the fit's search runs on the observer (pendulab.calibration._observer)
                 _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True, 2 if params.Mp > 0 else 1)
-
-
-def prepare_in_background(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> subprocess.Popen | None:
-    """:func:`prepare` in a separate process (None if it cannot start); ``wait()`` on it before replaying.
-
-    A first fit on a machine compiles its shooting functions and these replays; in another process the
-    two compilers run side by side. (Not a thread: CasADi's expression graphs are not thread-safe.)
-    """
-    request = json.dumps({"params": params.as_dict(), "periods": list(map(float, periods)), "free": list(free)})
-    try:
-        return subprocess.Popen(
-            [sys.executable, "-m", "pendulab.calibration._replay", request],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )
-    except OSError:
-        return None
 
 
 def replay(
@@ -310,8 +301,3 @@ def observe(
         state[:] = end
     out = out[:, :n, 0] if np.ndim(y) == 1 else out[:, :n]
     return (out, estimates[:, :n]) if states else out
-
-
-if __name__ == "__main__":  # prepare_in_background's worker
-    _request = json.loads(sys.argv[1])
-    prepare(PlantParameters.from_mapping(_request["params"]), _request["periods"], _request["free"])

@@ -1,6 +1,6 @@
 """Starting values for the fit from the logs themselves, whatever their shape.
 
-The fit's smoothed problem has local minima, and a start from the lab's defaults lands in a wrong one
+The fit's search has local minima, and a start from the lab's defaults lands in a wrong one
 when the rig is far from them (three times the breakaway force, five times the slip drag). Two
 things any log of a moving cart shows, without recognising a ramp test:
 

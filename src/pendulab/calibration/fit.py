@@ -5,48 +5,23 @@ the squared error to the logged positions (and angles, for logs with the pendulu
 
 Method
 ------
-*Model.* The equations are :func:`pendulab.model.plant.plant_equations`; for fitting, its friction
-force is replaced by a smoothed stick-slip law (:func:`fit_model`; the switch widths scale with
-the thresholds so that a cart below ``F1`` really stays stuck).
+*Model.* The equations are :func:`pendulab.model.plant.plant_equations` under the true (switching)
+stick-slip law, compiled to C (:mod:`pendulab.calibration._replay`), several parameter sets at once.
 
 Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a
 check replays the whole logs with it.
 
-*Stage 1 for the cart alone, the observer search* (:mod:`pendulab.calibration._observer`). The
-replay is a needle as an objective (a breakaway a millisecond early shifts the rest of a stretch); the
-same compiled plant corrected towards the logged position after every sample (an observer) forgets
-such a shift, and its one-sample prediction errors fall to one minimum at the true values along each
-parameter. Levenberg-Marquardt on them from the start, the lab's defaults and the logs' own estimate,
-scans along the slow logs' traps, and Levenberg-Marquardt again; an observer of narrow bandwidth
-(:data:`CHOICE_OMEGA`, where the common scale shows) chooses among the starts' answers.
-If the polished answer replays the logs within :data:`OBSERVER_ENOUGH_STEPS` encoder steps it stands;
-otherwise the smoothed problem below is solved too (with its fallbacks) and the better replay wins.
-
-*Stage 1 with the pendulum (and the fallback), multiple shooting on the smoothed law.* At most :data:`STAGE_SECONDS` of the logs (for
-longer logs, the :data:`PIECE_SECONDS` windows where the cart stops and starts most) are cut into
-shooting intervals of ``interval`` seconds (10 ms). The state at the start of every interval is an
-unknown, initialized from the smoothed log; one interval integrates its logged samples with RK4
-(sub-steps of at most ``max_substep``) inside one CasADi function, applied to all intervals at once
-with ``map``. Those functions and their Jacobians are compiled to C once per machine (see
-:mod:`pendulab.calibration._shooting`).
-
-*Continuity as process noise.* The defect between the end of one interval and the start of the
-next is a residual weighted by ``process_noise`` (per interval: 5 um, 0.5 mm/s) rather than a hard
-constraint. Stick-slip makes a simulation extremely sensitive to when the cart breaks away or
-re-sticks: with hard continuity a millisecond of difference in one breakaway becomes a millimetre
-offset that lasts until the end of the log and drowns everything else. The small defects absorb such
-local model errors, while the parameters still have to explain the motion of every interval.
-
-*Solver.* IPOPT (through ``nlpsol``) on ``1/2 |r|^2`` with the gradient ``J^T r`` and the
-Gauss-Newton Hessian ``J^T J`` supplied (``grad_f``, ``hess_lag``); the constraints ``F1 <= F2`` and
-``v1 <= v2`` and positivity bounds keep the friction model well ordered. Each fitted parameter is a
-decision variable divided by its starting value (or a typical size where that is 0). If the polished
-answer misses the logs by more than :data:`WIDE_ABOVE_STEPS` encoder steps, it is solved and polished
-again with the law's switches :data:`WIDE_SWITCHES` times wider (a smoother problem with fewer wrong
-basins); if the answer still does not replay the logs (a local minimum), from the lab's defaults,
-then from a start estimated from the logs themselves (:mod:`pendulab.calibration._start`: force gain
-and ``Beq`` from the fast motion, ``F1`` from the rests, whatever the logs' shape). The better replay
-wins.
+*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`). The replay is a needle as an
+objective (a breakaway a millisecond early shifts the rest of a stretch); the same compiled plant
+corrected towards the logged position (and angle) after every sample (an observer) forgets such a
+shift, and its one-sample prediction errors fall to one minimum at the true values along each
+parameter. Levenberg-Marquardt on them from the start, the lab's defaults and (the cart alone) the
+logs' own estimate, scans along the slow logs' traps, and Levenberg-Marquardt again; an observer of
+narrow bandwidth (:data:`CHOICE_OMEGA`, where the common scale shows) chooses among the starts'
+answers. Long logs are searched on at most :data:`STAGE_SECONDS` of them (the :data:`PIECE_SECONDS`
+windows where the cart stops and starts most), each piece from the observer's state estimate. With the
+pendulum up, open-loop unstable, the observer holds it to the logged angle, and its state estimates
+are where the replay restarts.
 
 *A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
 standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
@@ -119,11 +94,9 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Iterable, NamedTuple, Sequence
 
-import casadi as ca
 import numpy as np
 
 from pendulab.calibration import _observer, _polish, _replay
@@ -142,9 +115,8 @@ _UPPER = {"F1": 50.0, "v1": 1.0, "F2": 50.0, "v2": 2.0, "B": 2000.0, "Beq": 200.
 
 
 class _LogEstimate(NamedTuple):
-    """One whole log after the smoothed fit: its state estimates every ``stride`` samples (the fit's
-    nodes where it saw the log, the smoothed log elsewhere), its trajectory (NaN where it did not see
-    the log) and its measurement noise."""
+    """One whole log after the search: its state estimates every ``stride`` samples (the smoothed log; the
+    observer's with the pendulum), the observer's one-sample predictions and its measurement noise."""
 
     log: RampLog
     used: int
@@ -162,7 +134,7 @@ class FitCurve:
     t: np.ndarray
     V: np.ndarray
     x_measured: np.ndarray
-    x_fitted: np.ndarray  # the fit's trajectory (smoothed friction, position pinned at rests)
+    x_fitted: np.ndarray  # the observer's one-sample predictions at the search's answer
     x_simulated: np.ndarray  # the plant with the fitted parameters, free-running over the log
 
 
@@ -187,7 +159,6 @@ class FitResult:
     residual_rms: float
     params: PlantParameters
     n_samples: int
-    n_intervals: int
     iterations: int
     success: bool
     status: str
@@ -229,7 +200,7 @@ class FitResult:
         >>> t = np.arange(0.0, 4.0, 1e-3)
         >>> x = np.zeros_like(t)
         >>> curve = FitCurve("ramp.csv", t, np.full_like(t, 1.5), x, x, np.where((t > 2.0) & (t < 2.5), 3e-3, 0.0))
-        >>> FitResult(("F1",), {}, {}, {}, 0.0, None, 0, 0, 0, True, "", 0.0, curves=(curve,)).where_it_misses()
+        >>> FitResult(("F1",), {}, {}, {}, 0.0, None, 0, 0, True, "", 0.0, curves=(curve,)).where_it_misses()
         'worst in ramp.csv around t = 2.25 s: the cart position x off by 3 mm RMS over 0.5 s (at 1.5 V)'
         """
         worst: tuple[float, str] | None = None
@@ -264,11 +235,7 @@ class FitResult:
             **({"determination_note": self.confidence} if self.confidence else {}),
             "allowed_range": {n: [finite(a), finite(b)] for n, (a, b) in self.allowed.items()},
             "kept_start_value": [n for n, s in self.determination.items() if s == "not identified"],
-            "method": (
-                "least-squares fit on an observer of the replay (Levenberg-Marquardt on one-sample prediction errors), polished on the replay under the true law"
-                if self.status == OBSERVER_STATUS else
-                "least-squares fit (CasADi + IPOPT, multiple shooting, smoothed friction), polished on the replay under the true law"
-            ),
+            "method": "least-squares fit on an observer of the replay (Levenberg-Marquardt on one-sample prediction errors), polished on the replay under the true law",
             "uncertainty_method": self.uncertainty_method,
             "forward_simulation_restarts": self.restarts,
             "forward_simulation_voltage": "denoised (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
@@ -301,7 +268,7 @@ class FitResult:
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
             f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
-            f"{self.iterations} {'observer search' if self.status == OBSERVER_STATUS else 'IPOPT'} iterations, {self.seconds:.2f} s ({self.status})"
+            f"{self.iterations} observer search iterations, {self.seconds:.2f} s ({self.status})"
         )
         lines.append(
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
@@ -327,66 +294,10 @@ FORWARD_LIMIT_STEPS = 20.0
 #: that found the log's own answer replays within about two steps (the corpus: 0.9 to 2.5).
 CONFIDENT_STEPS = 3.0
 
-# ---------------------------------------------------------------------- the fit's model
-#: Widths of the smoothed stick-slip switches, relative to the thresholds they smooth.
-STICK_SPEED_WIDTH = 0.05  # x v1
-SLIP_SPEED_WIDTH = 0.02  # x v2
-FORCE_WIDTH = 0.01  # x F1, F2
-#: The fallback's switch widths, relative to the above, and the replay error (encoder steps) above
-#: which it is tried.
-WIDE_SWITCHES = 5.0
-WIDE_ABOVE_STEPS = 4.0
-#: A fallback's answer replaces the first one only if it replays the logs this much better (RMS ratio):
-#: two answers that replay about equally well say the logs cannot choose, and the first one started
-#: nearer (on a ramp log whose first answer missed by 202 um, the smoother law's 195 um had F2 = F1).
-FALLBACK_GAIN = 0.8
-#: The observer's answer (cart alone) stands if it replays the logs within this many encoder steps;
-#: otherwise the smoothed problem is solved too, and the better replay wins.
-OBSERVER_ENOUGH_STEPS = 2.5
 #: The bandwidth (rad/s) of the observer that chooses among the observer search's answers from its starts.
 CHOICE_OMEGA = 20.0
 #: The solver status of an answer of the observer search.
 OBSERVER_STATUS = "observer search converged"
-
-
-@lru_cache(maxsize=None)
-def fit_model(width_scale: float = 1.0) -> tuple[ca.Function, ca.Function]:
-    """``(ode, rk4)`` of the plant with the friction law smoothed for fitting.
-
-    The equations are :func:`pendulab.model.plant.plant_equations`; only its friction force node is
-    replaced (``casadi.graph_substitute``) by a smoothed stick-slip law whose switch widths scale with
-    the thresholds (``0.25 v1``, ``0.1 v2``, ``0.02 F1``, ``0.02 F2``). The fixed widths of
-    ``smooth_friction=True`` (2 mm/s on the speed) are comparable to ``v1`` itself: with them a cart
-    pushed by 90 % of ``F1`` does not stay stuck but creeps and breaks away, which biases a fit of
-    ``F1`` and of everything after a breakaway.
-    """
-    from pendulab.model.plant import plant_equations
-
-    names = PlantParameters.names()
-    state, V, pvec, t = ca.MX.sym("state", 4), ca.MX.sym("V"), ca.MX.sym("p", len(names)), ca.MX.sym("t")
-    p = {name: pvec[i] for i, name in enumerate(names)}
-    derivative, signals = plant_equations(state, V, p, t, smooth_friction=False)
-    F_motor, xdot = signals["F_motor"], state[1]
-
-    def step(z: ca.MX) -> ca.MX:
-        return 0.5 * (1 + ca.tanh(z))
-
-    speed = ca.sqrt(xdot**2 + (0.01 * p["v1"]) ** 2 + 1e-12)
-    force = ca.sqrt(F_motor**2 + (0.01 * p["F1"]) ** 2 + 1e-12)
-    k = width_scale
-    stick = step((p["v1"] - speed) / (k * STICK_SPEED_WIDTH * p["v1"] + 1e-6)) * step((p["F1"] - force) / (k * FORCE_WIDTH * p["F1"] + 1e-3))
-    slip = step((p["v2"] - speed) / (k * SLIP_SPEED_WIDTH * p["v2"] + 1e-6)) * step((p["F2"] - force) / (k * FORCE_WIDTH * p["F2"] + 1e-3))
-    friction = -stick * F_motor - (1 - stick) * slip * p["B"] * xdot
-    derivative = ca.graph_substitute(derivative, [signals["F_friction"]], [friction])
-    ode = ca.Function("fit_ode", [state, V, pvec, t], [derivative]).expand()
-    s, u, pp, tt, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("p", len(names)), ca.SX.sym("t"), ca.SX.sym("h")
-    k1 = ode(s, u, pp, tt)
-    k2 = ode(s + h / 2 * k1, u, pp, tt + h / 2)
-    k3 = ode(s + h / 2 * k2, u, pp, tt + h / 2)
-    k4 = ode(s + h * k3, u, pp, tt + h)
-    rk4 = ca.Function("fit_rk4", [s, u, pp, tt, h], [s + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
-    return ode, rk4
-
 
 def _noise_level(x: np.ndarray) -> float:
     """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
@@ -441,17 +352,17 @@ EVOLVE_SEEDS = (19, 20)
 EVOLVE_REPLAYS = _polish.EVOLVE_GENERATIONS
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
 POLISH_WORK = 1.4e7
-#: The smoothed fit sees at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
+#: The searches see at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
 STAGE_SECONDS = 20.0
 PIECE_SECONDS = 4.0
 
 
 def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int]) -> list[tuple[RampLog, int, int]]:
-    """``(piece, index of its log, first sample)`` for the smoothed fit: whole logs if they are short.
+    """``(piece, index of its log, first sample)`` for the searches: whole logs if they are short.
 
     Longer logs give the PIECE_SECONDS windows where the cart stops and starts most often, then
     travels most (breakaways and sticking tell the friction apart; a long rest tells little), up to
-    STAGE_SECONDS in all, not overlapping, each starting on a shooting node of its log.
+    STAGE_SECONDS in all, not overlapping, each starting on a state estimate of its log.
     """
     total = sum(log.duration for log in logs)
     if total <= STAGE_SECONDS * 1.25:
@@ -504,7 +415,7 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
         M = interval_samples(log)
         if len(log) < 2 * M + 1:
             raise CalibrationError(
-                f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two shooting intervals "
+                f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two intervals of the state estimates "
                 "and should contain the cart breaking away and moving"
             )
         if np.ptp(log.x) < 1e-4:
@@ -526,12 +437,8 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
 
 
 # ---------------------------------------------------------------------- the fit's stages
-#: Default process noise per shooting interval (x m, xdot m/s, alpha rad, alphadot rad/s).
-PROCESS_NOISE = (5e-6, 5e-4, 5e-5, 5e-3)
-
-
 def _stride(log: RampLog, interval: float) -> int:
-    """Samples per shooting interval of ``interval`` seconds (and between the state estimates) of ``log``."""
+    """Samples between the state estimates (``interval`` seconds apart) of ``log``."""
     return max(1, int(round(interval / log.period)))
 
 
@@ -546,19 +453,12 @@ class _Setup:
     theta0: np.ndarray  # the start, scaled
     theta_default: np.ndarray  # the lab's defaults, scaled
     space: _polish.Space
-    interval: float  # the smoothed problem's shooting interval (s)
+    interval: float  # between the state estimates (s)
     pieces: list[tuple[RampLog, int, int]]  # what the searches see of long logs (:func:`_pieces`)
     voltage_noise: float  # the logged voltage's sample noise (V; the largest over the logs)
     progress: Callable[[str], None]
     polish_iter: int
     polish_work: float
-    prebuild: Any = None  # the replay's compiled functions, building in another process
-
-    def built(self) -> None:
-        """Wait for the replay's compiled functions (:func:`pendulab.calibration._replay.prepare_in_background`)."""
-        if self.prebuild is not None:
-            self.prebuild.wait()
-            self.prebuild = None
 
     @property
     def with_pendulum(self) -> bool:
@@ -577,11 +477,11 @@ class _Setup:
         return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
 
     def stride(self, log: RampLog) -> int:
-        """Samples per shooting interval (and between the state estimates) of ``log``."""
+        """Samples between the state estimates of ``log``."""
         return _stride(log, self.interval)
 
     def used(self, log: RampLog) -> int:
-        """The samples of ``log`` the fit sees: whole shooting intervals."""
+        """The samples of ``log`` the fit sees: whole intervals between state estimates."""
         M = self.stride(log)
         return ((len(log) - 1) // M) * M + 1
 
@@ -599,8 +499,7 @@ class _Candidate:
     rms: float  # the search's own residual RMS (m)
     whole: list[_LogEstimate]
     replays: list[_polish.Anchors]  # the whole logs' restarts for the replay
-    n_intervals: int = 0  # shooting intervals (0: the observer search)
-    others: tuple[np.ndarray, ...] | None = None  # the observer search's other starts' answers (None: the smoothed problem's)
+    others: tuple[np.ndarray, ...] = ()  # the observer search's other starts' answers
 
 
 @dataclass
@@ -623,120 +522,6 @@ def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEs
         replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)])
         for piece, j, first in setup.pieces
     ]
-
-
-@dataclass
-class _Shooting:
-    """Settings of the smoothed problem (:func:`_smoothed_search`)."""
-
-    max_substep: float
-    process_noise: Sequence[float]
-    regularization: float
-    max_iter: int
-    tolerance: float
-    compile: bool | None
-    verbose: bool
-
-
-def _smoothed_search(setup: _Setup, shooting: _Shooting, width_scale: float) -> Callable[[np.ndarray], _Candidate]:
-    """Stage 1 with the pendulum (and the cart's fallback): the smoothed problem, multiple shooting, with the
-    law's switch widths times ``width_scale``; returns its solve from a scaled start."""
-    from pendulab.calibration._shooting import IntervalFunctions, LogBlock, Problem
-    from pendulab.native import VM_FALLBACK_NOTE, install_hint
-
-    names, scales, params0, logs, with_pendulum = setup.names, setup.scales, setup.params0, setup.logs, setup.with_pendulum
-    ns = 4 if with_pendulum else 2
-    all_names = PlantParameters.names()
-    fitted_idx = tuple(all_names.index(n) for n in names)
-    p0 = np.asarray(params0.as_vector(), dtype=float)
-    defect_sigma = np.asarray(shooting.process_noise, dtype=float)[:ns]
-    t_prepare = time.perf_counter()
-    functions: dict[tuple[int, int], IntervalFunctions] = {}
-    blocks: list[LogBlock] = []
-    offset_w, offset_r = len(names), 0
-    for log in (piece for piece, _, _ in setup.pieces):
-        M = setup.stride(log)
-        n_sub = max(1, int(math.ceil(log.period / shooting.max_substep - 1e-9)))
-        if (M, n_sub) not in functions:
-            functions[M, n_sub] = IntervalFunctions(fit_model(width_scale)[1], M, n_sub, ns, fitted_idx, p0, with_pendulum, shooting.compile)
-        used = setup.used(log)
-        sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-        nodes0 = _initial_states(log, with_pendulum)[:used:M]
-        block = LogBlock(log, M, functions[M, n_sub], offset_w, offset_r, sigma, defect_sigma, nodes0)
-        blocks.append(block)
-        offset_w += block.n_w
-        offset_r += block.n_r
-    setup.built()  # the replay's functions compiled beside these (a first fit on a machine builds both)
-    if any(f.built for f in functions.values()):
-        setup.progress(f"compiled the shooting functions to C in {time.perf_counter() - t_prepare:.1f} s (cached for later fits)")
-    problem = Problem(blocks, len(names), scales, setup.theta0, shooting.regularization)
-    compiled = all(f.compiled for f in functions.values())
-
-    # IPOPT sees 1/2 |r(w)|^2 with the gradient J^T r and the Gauss-Newton Hessian J^T J.
-    w, r_jac, J = problem.w, problem.residuals_jac, problem.jacobian
-    p_none = ca.MX(0, 1)
-    grad_f = ca.Function("fit_grad_f", [w, p_none], [0.5 * ca.sumsqr(r_jac), ca.mtimes(J.T, r_jac)], ["x", "p"], ["f", "grad_f_x"])
-    lam_f = ca.MX.sym("lam_f")
-    theta = w[: len(names)]
-
-    def value_of(name: str) -> ca.MX | float:
-        return theta[names.index(name)] * scales[names.index(name)] if name in names else getattr(params0, name)
-
-    order = [value_of(high) - value_of(low) for low, high in (("F1", "F2"), ("v1", "v2")) if low in names or high in names]
-    g = ca.vertcat(*order) if order else ca.MX(0, 1)
-    lam_g = ca.MX.sym("lam_g", g.shape[0])
-    hess_lag = ca.Function(
-        "fit_gauss_newton", [w, p_none, lam_f, lam_g], [ca.triu(lam_f * ca.mtimes(J.T, J))],
-        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
-    )
-    verbose = shooting.verbose
-    options = {
-        "grad_f": grad_f,
-        "hess_lag": hess_lag,
-        "print_time": bool(verbose),
-        "calc_lam_p": False,
-        "calc_lam_x": False,
-        "no_nlp_grad": True,
-        "ipopt": {"max_iter": shooting.max_iter, "tol": shooting.tolerance, "acceptable_tol": 1e-1, "print_level": 5 if verbose else 0, "sb": "yes",
-                  "mu_init": 1e-4, "mu_strategy": "adaptive", "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-9},
-    }
-    lbx = np.concatenate([np.array([_LOWER[n] for n in names]) / scales, np.full(problem.n_w - len(names), -np.inf)])
-    ubx = np.concatenate([np.array([_UPPER[n] for n in names]) / scales, np.full(problem.n_w - len(names), np.inf)])
-    n_intervals = sum(b.N for b in blocks)
-    setup.progress(
-        f"fitting {', '.join(names)} to {len(logs)} log(s): {sum(len(log) for log in logs)} samples, {n_intervals} shooting intervals"
-        + (f" (the friction law's switches {width_scale:g} times wider)" if width_scale != 1 else "")
-        + ("" if compiled else f" ({VM_FALLBACK_NOTE}; to compile it, {install_hint()})")
-    )
-    solver = ca.nlpsol("calibration_fit", "ipopt", {"x": w, "f": 0.5 * ca.sumsqr(problem.residuals), "g": g}, options)
-    solution_of = ca.Function("fit_solution", [w], [r_jac, J, *problem.outputs])
-
-    def solve(theta_start: np.ndarray) -> _Candidate:
-        """The smoothed problem solved from ``theta_start``: its answer, state estimates and the logs' anchors."""
-        x_start = np.concatenate([theta_start] + [b.nodes0.ravel() for b in blocks])
-        solution = solver(x0=x_start, lbx=lbx, ubx=ubx, lbg=np.zeros(g.shape[0]), ubg=np.full(g.shape[0], np.inf))
-        stats = solver.stats()
-        w_opt = np.asarray(solution["x"]).ravel()
-        setup.progress(f"IPOPT (smoothed friction): {stats.get('return_status')} after {stats.get('iter_count')} iterations")
-        outputs = [np.asarray(y) for y in solution_of(w_opt)[2:]]
-        errors = np.concatenate([y[0 :: b.n_out].T.ravel() - b.log.x[1 : b.used] for y, b in zip(outputs, blocks)])
-        _, nodes = problem.split(w_opt)
-        whole: list[_LogEstimate] = []
-        for j, log in enumerate(logs):
-            M, used = setup.stride(log), setup.used(log)
-            estimates = _initial_states(log, with_pendulum)[:used:M].T.copy()
-            fitted = np.full(used, np.nan)
-            for (_, owner, first), b, S, y in zip(setup.pieces, blocks, nodes, outputs):
-                if owner == j:
-                    k = first // M
-                    estimates[:, k : k + S.shape[1]] = S[:, : estimates.shape[1] - k]
-                    fitted[first : first + b.used] = np.r_[S[0, 0], y[0 :: b.n_out].T.ravel()][: used - first]
-            sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-            whole.append(_LogEstimate(log, used, M, estimates, fitted, sigma))
-        replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
-        return _Candidate(w_opt[: len(names)], np.asarray(theta_start, dtype=float), stats, float(np.sqrt(np.mean(errors**2))), whole, replays, n_intervals)
-
-    return solve
 
 
 def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
@@ -787,29 +572,21 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     replays = candidate.replays
     # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
     searched = _pieces_of(setup, replays, candidate.whole)
-    # The polish starts from the search's answer, or from where the search started if that replays the logs
-    # better (a start from a ramp test's extraction can be nearer than the smoothed answer, whose smoothing
-    # biases it). The observer barely sees the common scale of a slow log (a weak model's predictions are as
-    # good: the observer corrects them): the other starts' answers are candidates too.
-    first = candidate.theta
-    starts = np.array([first, *(candidate.others or ()), space.project(candidate.start.copy())])
-    voltages = [searched]
+    # The polish starts from the search's answer or another start's, or from where the search started. The
+    # observer barely sees the common scale of a slow log (a weak model's predictions are as good: the observer
+    # corrects them), so an observer of narrow bandwidth chooses: it sees the common scale as the replay does,
+    # without the replay's needle (on a sweep of the unseen rig the replay chose an answer that polished to 2.9
+    # encoder steps; the observer at 20 rad/s chooses the search's own answer).
+    starts = np.array([candidate.theta, *candidate.others, space.project(candidate.start.copy())])
+    which = 0
     if setup.denoise:
         # Noise the motor never saw flips the stick-slip law's decisions near a threshold (a level 1 % below
         # the breakaway force breaks away in the replay): the denoised twin is tried too, and the better of
         # the two (at the better start) is searched.
-        voltages.append([_polish.denoised(a) for a in searched])
-    which = 0
-    if len(voltages) > 1 or candidate.others is None:  # the observer's answers are chosen below, not by the replay
-        costs = [_polish.costs(v, space, starts) for v in voltages]
-        which = int(np.argmin([float(np.min(c)) for c in costs]))
-        first = starts[int(np.argmin(costs[which]))]
-    searched = voltages[which]
-    if candidate.others is not None:
-        # Among the observer search's answers an observer of narrow bandwidth chooses: it sees the common scale
-        # as the replay does, without the replay's needle (on a sweep of the unseen rig the replay chose an answer
-        # that polished to 2.9 encoder steps; the observer at 20 rad/s chooses the search's own answer).
-        first = starts[int(np.argmin(_observer.costs(searched, space, starts, CHOICE_OMEGA)))]
+        voltages = [searched, [_polish.denoised(a) for a in searched]]
+        which = int(np.argmin([float(np.min(_polish.costs(v, space, starts))) for v in voltages]))
+        searched = voltages[which]
+    first = starts[int(np.argmin(_observer.costs(searched, space, starts, CHOICE_OMEGA)))]
     if which:
         replays = [_polish.denoised(a) for a in replays]
     polish_iter, work = setup.polish_iter, setup.polish_work
@@ -980,7 +757,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         residual_rms=candidate.rms,
         params=params,
         n_samples=sum(len(log) for log in setup.logs),
-        n_intervals=candidate.n_intervals,
         iterations=int(stats.get("iter_count", -1)),
         success=bool(stats.get("success", False)),
         status=str(stats.get("return_status", "unknown")),
@@ -1001,18 +777,13 @@ def fit_parameters(
     fit_mass: bool = False,
     *,
     interval: float = 0.01,
-    max_substep: float = 1e-3,
-    process_noise: Sequence[float] = PROCESS_NOISE,
     regularization: float = 1.0,
-    max_iter: int = 60,
-    tolerance: float = 1e-6,
     compile: bool | None = None,
     polish_iter: int = 12,
     start: str = "auto",
     polish_work: float = POLISH_WORK,
     start_from_logs: bool = True,
     on_progress: Callable[[str], None] | None = None,
-    verbose: bool = False,
 ) -> FitResult:
     """Fit parameters of the plant to logged runs by least squares (see the module docstring).
 
@@ -1030,16 +801,13 @@ def fit_parameters(
         together leaves the motion unchanged except through the fixed rotor inertia, so expect large
         uncertainties on all of them when the mass is fitted too.
     interval : float
-        Shooting interval (s).
-    max_substep : float
-        Largest RK4 step inside the fit (s); the logged period is split into equal sub-steps.
-    process_noise : sequence of 4 floats
-        Standard deviation of the model error per interval for ``x, xdot, alpha, alphadot``: the
-        weight of the continuity defects.
+        Spacing (s) of the state estimates: where the pieces of long logs start and an upright
+        pendulum's replay restarts (every :data:`pendulab.calibration._polish.UNSTABLE_WINDOW`).
     regularization : float
         Weight of the weak prior towards ``params0`` (0 switches it off).
     compile : bool, optional
-        Compile the interval functions to C (cached per machine); default: when a compiler exists.
+        Compile the observer and the replay to C (cached per machine); default: when a compiler exists
+        (without one, CasADi's virtual machine evaluates them, several times slower).
     polish_iter : int
         Largest number of pattern-search steps of the polish on the true law's replay.
     start : {"auto", "given"}
@@ -1050,16 +818,11 @@ def fit_parameters(
         Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
         same answer on a busy machine.
     start_from_logs : bool
-        As a last try, when the other answers do not replay the logs, start from an estimate made
-        from the logs themselves (:mod:`pendulab.calibration._start`: the drive and the drag from
-        fast motion, the breakaway force from the rests). Not for logs with the pendulum.
-
+        Also start the observer search from an estimate made from the logs themselves
+        (:mod:`pendulab.calibration._start`: the drive and the drag from fast motion, the breakaway
+        force from the rests). Not for logs with the pendulum.
     on_progress : callable, optional
         Called with a line of text at each stage.
-    verbose : bool
-        Print the solver's output.
-    max_iter, tolerance
-        The smoothed fit's Gauss-Newton iterations and their tolerance.
 
     Returns
     -------
@@ -1101,47 +864,15 @@ def fit_parameters(
         pieces=[], voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
         polish_iter=polish_iter, polish_work=polish_work,
     )
-    # The smoothed fit (the costly part) sees at most STAGE_SECONDS of the logs, in pieces spread over
-    # them; the polish and the check see everything.
+    # The searches see at most STAGE_SECONDS of the logs, in pieces spread over them; the check sees everything.
     setup.pieces = _pieces(logs, setup.stride)
-    # The replay's compiled functions build in another process beside the shooting functions (a first
-    # fit on a machine compiles both; the compilers then run side by side).
     if compile is not False:
-        setup.prebuild = _replay.prepare_in_background(params0, [log.period for log in logs], names)
-    shooting = _Shooting(max_substep, process_noise, regularization, max_iter, tolerance, compile, verbose)
-    step = max(setup.step, 1e-6)
+        _replay.prepare(params0, [log.period for log in logs], names)  # the replay and the observer, compiled once per machine
+    if compile is False or not all(_replay.observer_compiled(params0, log.period, names) for log in logs):
+        from pendulab.native import VM_FALLBACK_NOTE, install_hint
 
-    best: _Answer | None = None
-    # The observer search runs hundreds of batched observer runs: in CasADi's virtual machine (no C compiler)
-    # that takes minutes, so there the smoothed problem alone is solved (a 3.8 s ramp: 15 s instead of 50 s).
-    setup.built()  # it builds the observer too: wait for it, not build it twice
-    if compile is not False and all(_replay.observer_compiled(params0, log.period, names) for log in logs):
-        # The cart alone: the observer search first; its answer stands if the replay confirms it.
-        best = _polished(setup, _observer_search(setup, start_from_logs))
-        if best.rms <= OBSERVER_ENOUGH_STEPS * step:
-            return _result(setup, _evolved(setup, best), start_values, t_start)
-        progress(f"the observer's answer does not replay the logs (RMS {best.rms * 1e6:.0f} um); solving the smoothed problem")
-    # More tries while the polished answer misses the logs (a local minimum of the smoothed problem), each
-    # above its own threshold (encoder steps): wider switches make a smoother problem with fewer wrong
-    # basins (the polish removes their bias; a 20 s sweep logged at 2 ms, or a sticky rig's steps, fit
-    # with them where the narrow ones fail); then the lab's defaults (the logs' own estimate of the drive,
-    # the drag and F1 is a start of the observer search). A try's answer wins only if it replays clearly better.
-    smoothed = _smoothed_search(setup, shooting, 1.0)
-    other = _polished(setup, smoothed(theta0))
-    if best is None or other.rms < best.rms:
-        best = other
-    tries: list[tuple[float, str, Callable[[], _Candidate]]] = [
-        (WIDE_ABOVE_STEPS, "with a smoother friction law", lambda: _smoothed_search(setup, shooting, WIDE_SWITCHES)(theta0)),
-    ]
-    if np.max(np.abs(setup.theta_default / theta0 - 1)) > 0.05:
-        tries.append((FORWARD_LIMIT_STEPS, "from the lab's defaults", lambda: smoothed(setup.theta_default)))
-    for above, label, solve in tries:
-        if best.rms <= above * step:
-            continue
-        progress(f"the answer does not replay the logs (RMS {best.rms * 1e6:.0f} um); solving again {label}")
-        other = _polished(setup, solve())
-        if other.rms < FALLBACK_GAIN * best.rms:
-            best = other
+        progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")
+    best = _polished(setup, _observer_search(setup, start_from_logs))
     return _result(setup, _evolved(setup, best), start_values, t_start)
 
 

@@ -14,10 +14,11 @@ from pendulab.outputs import check_output_file
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "fit",
-        help="refit friction, Beq and force gain to logged runs (least squares, CasADi + IPOPT)",
+        help="refit friction, Beq and force gain to logged runs (least squares on the replay of the logged voltage)",
         description=(
-            "Replay the logged voltage through the CasADi plant (smoothed friction) and fit the friction vector, "
-            "Beq and the force gain (optionally M_cart) to the logged positions by multiple shooting. "
+            "Replay the logged voltage through the CasADi plant and fit the friction vector, Beq and the force gain "
+            "(optionally M_cart) to the logged positions (and angles): a search on an observer of the replay, then a "
+            "polish on the replay under the true stick-slip law. "
             "Logs: CSV with columns t, V, x (alpha optional), the run.csv / run.mat of 'pendulab simulate', or a folder "
             "of the old MATLAB lab's logs (one .mat per signal). The answer is checked by a forward simulation of the "
             "whole log under the true stick-slip law; exit status 3 when it misses by far more than the encoder step "
@@ -43,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", metavar="FILE", help="write the fitted values as a calibration file (JSON)")
     parser.add_argument("--plot", metavar="PNG", help="plot measured against refitted motion")
     add_overwrite_option(parser)
-    parser.add_argument("--interval", type=float, default=0.01, metavar="S", help="shooting interval (default 0.01 s)")
+    parser.add_argument("--interval", type=float, default=0.01, metavar="S", help="spacing of the fit's state estimates, where an upright pendulum's replay restarts (default 0.01 s)")
     parser.set_defaults(func=run)
 
 
@@ -71,11 +72,6 @@ def run(args: argparse.Namespace) -> int:
         on_progress=lambda text: print(text, flush=True),
     )
     print(result.summary())
-    if not result.success and result.forward_ok:
-        # The smoothed stage only finds the basin; the answer is the polish on the true law's replay,
-        # and the forward check above is what it is judged by.
-        print(f"note: the smoothed stage (IPOPT) stopped at {result.status}; the values come from the polish on the "
-              "replay under the true stick-slip law and pass the forward check")
     if not result.forward_ok:
         if plot:  # the picture of the mismatch helps to see why; no calibration is written
             plot_fit(result, plot)
