@@ -30,7 +30,6 @@ import numpy as np
 
 from pendulab.calibration._replay import replay
 from pendulab.model.parameters import PlantParameters
-from pendulab.model.plant import MAX_SUBSTEP
 
 #: A rest: the logged position stays within this many encoder steps (or 6 noise sigmas) for REST_WINDOW.
 REST_STEPS = 2.5
@@ -258,11 +257,11 @@ def denoised(a: Anchors) -> Anchors:
     return Anchors(denoised_voltage(a.V), a.t, a.measured, a.sigma, a.x0, a.restarts, a.segments, True)
 
 
-def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...], max_substep: float = MAX_SUBSTEP) -> np.ndarray:
+def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...]) -> np.ndarray:
     """Weighted replay errors, ``(m, n_errors)``, for parameter sets ``vectors`` ``(m, n_params)``."""
     rows = []
     for a in logs:
-        states = replay(vectors, a.V, a.t, a.x0, a.restarts, free=free, max_substep=max_substep)
+        states = replay(vectors, a.V, a.t, a.x0, a.restarts, free=free)
         simulated = states[:, :, [0, 2][: a.measured.shape[1]]]
         errors = (simulated - a.measured[None]) / a.sigma[None, None, :]
         rows.append(errors.reshape(errors.shape[0], -1))
@@ -315,18 +314,18 @@ class Space:
                 th[names.index(low)], th[names.index(high)] = mid / scales[names.index(low)], mid / scales[names.index(high)]
         return th
 
-    def residuals(self, logs: list[Anchors], thetas: np.ndarray, max_substep: float = MAX_SUBSTEP) -> np.ndarray:
+    def residuals(self, logs: list[Anchors], thetas: np.ndarray) -> np.ndarray:
         """Weighted replay errors and the prior's residuals, ``(m, n_residuals)``."""
-        r = replay_errors(logs, self.vectors(thetas), self.names, max_substep)
+        r = replay_errors(logs, self.vectors(thetas), self.names)
         if self.prior is None:
             return r
         centre, weight = self.prior
         return np.concatenate([r, math.sqrt(weight) * (thetas - centre[None, :])], axis=1)
 
 
-def costs(logs: list[Anchors], space: Space, thetas: np.ndarray, max_substep: float = MAX_SUBSTEP) -> np.ndarray:
+def costs(logs: list[Anchors], space: Space, thetas: np.ndarray) -> np.ndarray:
     """The replay cost (sum of squared weighted errors) of each of ``thetas`` ``(m, n)``; a failed replay costs 1e6 per error."""
-    R = np.nan_to_num(space.residuals(logs, np.atleast_2d(thetas), max_substep), nan=1e6)
+    R = np.nan_to_num(space.residuals(logs, np.atleast_2d(thetas)), nan=1e6)
     return np.einsum("ij,ij->i", R, R)
 
 
@@ -448,7 +447,6 @@ def polish(
     scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015),
     scan_points: int = 15,
     scan_rounds: int = 2,
-    scan_substep: float = MAX_SUBSTEP,
     pairs: tuple[tuple[str, str], ...] = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain")),
 ) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
@@ -470,9 +468,9 @@ def polish(
     done = {"samples": 0.0}
     n_samples = sum(a.n for a in logs)
 
-    def residuals(thetas: np.ndarray, max_substep: float = MAX_SUBSTEP) -> np.ndarray:
+    def residuals(thetas: np.ndarray) -> np.ndarray:
         done["samples"] += thetas.shape[0] * n_samples
-        return space.residuals(logs, thetas, max_substep)
+        return space.residuals(logs, thetas)
 
     theta = project(np.asarray(theta, dtype=float).copy())
     r = residuals(theta[None])[0]
@@ -480,11 +478,9 @@ def polish(
     radius, replays, it, n = first_step, 1, 0, len(theta)
     # The thresholds first: whether a push breaks the cart away (F1) or slides it freely (F2) is a
     # jump in the replay, and a search's threshold a few per cent off misses whole motions.
-    # A scan along each (coarse, then fine around the best), one batched replay per scan, at the
-    # sub-step ``scan_substep`` (each scan holds the current value, so its costs compare among
-    # themselves); the answer is kept if the replay at the plant's own sub-step agrees it is better.
-    # (A coarser sub-step, 0.5 ms, is three times faster and helped a sweep and ramps, but it sent a
-    # log of steps into a worse basin: the plant's own is the default.)
+    # A scan along each (coarse, then fine around the best), one batched replay per scan; the answer is
+    # kept if it is better. (A coarser sub-step than the plant's, 0.5 ms, is three times faster, but it
+    # moves the replay by about an encoder step and sent a log of steps into a worse basin.)
     scanned = theta
     for name in [n_ for n_ in scan if n_ in names] * scan_rounds:
         j = names.index(name)
@@ -494,7 +490,7 @@ def polish(
             trials = np.tile(scanned, (scan_points, 1))
             trials[:, j] = scanned[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), scan_points))
             trials = np.array([project(th) for th in trials])
-            R = residuals(trials, scan_substep)
+            R = residuals(trials)
             replays += 1
             scanned = trials[int(np.argmin(np.einsum("ij,ij->i", R, R)))]
     if scanned is not theta:
