@@ -17,8 +17,8 @@ from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
 
 
 @lru_cache(maxsize=64)
-def _trajectory(n_steps: int, n_sub: int, smooth: bool, n_parallel: int) -> ca.Function:
-    accum = step_function(smooth, n_sub).expand().mapaccum("plant_steps", n_steps)
+def _trajectory(n_steps: int, n_sub: int, n_parallel: int) -> ca.Function:
+    accum = step_function(False, n_sub).expand().mapaccum("plant_steps", n_steps)
     # Wrap it so that p and h are one column each: map() then splits them per trajectory correctly.
     x0, V, t = ca.MX.sym("x0", 4), ca.MX.sym("V", 1, n_steps), ca.MX.sym("t", 1, n_steps)
     p, h = ca.MX.sym("p", len(PlantParameters.names())), ca.MX.sym("h")
@@ -34,7 +34,6 @@ def simulate_many(
     x0: np.ndarray,
     *,
     t0: float = 0.0,
-    smooth_friction: bool = False,
     max_substep: float = MAX_SUBSTEP,
 ) -> np.ndarray:
     """States after each step for several parameter sets: array ``(len(params), n, 4)``.
@@ -47,7 +46,7 @@ def simulate_many(
     vectors = np.column_stack([np.asarray(p.as_vector() if isinstance(p, PlantParameters) else p, dtype=float) for p in params])
     m = vectors.shape[1]
     n_sub = substeps(step, max_substep)
-    f = _trajectory(n, n_sub, smooth_friction, m)
+    f = _trajectory(n, n_sub, m)
     times = t0 + step * np.arange(n)
     x0 = np.asarray(x0, dtype=float).reshape(4, 1)
     out = f(np.tile(x0, (1, m)), np.tile(V[None, :], (1, m)), vectors, np.tile(times[None, :], (1, m)), step / n_sub)

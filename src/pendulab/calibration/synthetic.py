@@ -153,45 +153,6 @@ def calibrate_ramp_log(rig: PlantParameters = TRUE, *, iterations: int = 1, nois
     return _measured(log.t, log.V, log.x, rig.q_x, noise, voltage_noise, seed, "synthetic calibrate ramp test")
 
 
-def synthetic_ramp_log(
-    params: PlantParameters,
-    iterations: int = 1,
-    *,
-    noise: float = 1e-5,
-    seed: int = 0,
-    duration: float | None = None,
-    x0: float = 0.05,
-    backend: str = "auto",
-) -> RampLog:
-    """A ramp test of the virtual rig with ``params``; position noise added before quantization.
-
-    The rig's own encoder quantizes ``x`` (``params.q_x``); here Gaussian noise of standard deviation
-    ``noise`` (m) is added to the true position and the sum is quantized again, as a real encoder
-    with vibration would read it. ``duration`` repeats iterations until the log is at least that
-    long and cuts it there.
-    """
-    from pendulab.calibration.ramp import run_ramp_test
-    from pendulab.calibration.rig import VirtualRig
-
-    rng = np.random.default_rng(seed)
-    with VirtualRig(params, x0=x0, backend=backend) as rig:
-        if duration is None:
-            log = run_ramp_test(rig, iterations=iterations)
-        else:
-            log = run_ramp_test(rig, iterations=max(iterations, 1))
-            while log.duration < duration:
-                more = int(np.ceil(duration / max(log.duration, 1.0) * max(iterations, 1))) + 1
-                log = run_ramp_test(rig, iterations=more)
-            keep = log.t <= log.t[0] + duration
-            log = RampLog(log.t[keep], log.V[keep], log.x[keep], source=log.source, events=log.events)
-    true_x = log.x
-    q = params.q_x
-    noisy = true_x + rng.normal(0.0, noise, len(true_x)) if noise > 0 else true_x.copy()
-    if q > 0:
-        noisy = q * np.round(noisy / q)
-    return RampLog(log.t, log.V, noisy, source=f"synthetic ({log.source}, noise {noise:g} m)", events=log.events)
-
-
 @dataclass(frozen=True)
 class Case:
     """One corpus case: a shape on a rig, with or without voltage noise."""
