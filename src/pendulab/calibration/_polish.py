@@ -530,53 +530,6 @@ def polish(
     return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=replays)
 
 
-#: Pairs whose joint effect makes narrow valleys of the replay's cost: leaving the slip region
-#: happens at ``min(F2, (B + Beq) v2)`` of drive, so ``v2`` trades off against ``F2`` and ``B``, and the
-#: re-sticking at ``v1`` against where the slip region ends.
-VALLEY_PAIRS = (("F2", "v2"), ("v1", "v2"), ("B", "v2"))
-
-
-def refine_pairs(
-    logs: list[Anchors],
-    space: Space,
-    theta: np.ndarray,
-    pairs: tuple[tuple[str, str], ...] = VALLEY_PAIRS,
-    fine: float = 0.015,
-    coarse: float = 0.1,
-    n_fine: int = 4,
-    n_coarse: int = 8,
-) -> tuple[np.ndarray, float]:
-    """Grids over pairs of parameters, one fine and one coarse axis, to step along narrow valleys.
-
-    A pattern search moves each parameter (or a pair, equally) by one radius, so it stops in a valley
-    that runs at a slant: along it ``v2`` may move by 6 % while ``F2`` moves by 0.4 %, and either move
-    alone raises the cost twentyfold. Here each pair is gridded both ways round (``n_fine`` relative
-    offsets within ``fine`` on one axis times ``n_coarse`` within ``coarse`` on the other, 32 parameter
-    sets: one batched replay each); the best point is kept whenever it lowers the cost. Returns the
-    new ``theta`` and its cost.
-    """
-    names = space.names
-    r = space.residuals(logs, theta[None])[0]
-    cost = float(r @ r)
-    fine_steps = np.exp(np.linspace(-math.log1p(fine), math.log1p(fine), n_fine))
-    coarse_steps = np.exp(np.linspace(-math.log1p(coarse), math.log1p(coarse), n_coarse))
-    for a_, b_ in pairs:
-        if a_ not in names or b_ not in names:
-            continue
-        for f_name, c_name in ((a_, b_), (b_, a_)):
-            i, j = names.index(f_name), names.index(c_name)
-            trials = np.tile(theta, (fine_steps.size * coarse_steps.size, 1))
-            trials[:, i] *= np.repeat(fine_steps, coarse_steps.size)
-            trials[:, j] *= np.tile(coarse_steps, fine_steps.size)
-            trials = np.array([space.project(th) for th in trials])
-            R = space.residuals(logs, trials)
-            costs = np.einsum("ij,ij->i", R, R)
-            k = int(np.argmin(costs))
-            if costs[k] < cost:
-                theta, cost = trials[k], float(costs[k])
-    return theta, cost
-
-
 #: The slip region's corner: the cart leaves the slip region at ``F2`` of drive or at ``v2`` of speed,
 #: whichever comes first. One moved alone shifts every such exit; the other moved with it puts them back,
 #: so the replay's cost runs in a narrow valley along the pair (on the unseen rig's calibrate ramp test,

@@ -28,13 +28,11 @@ standard deviation of 100 % of the starting value in units of the measurement no
 parameters that the logs cannot show at their starting values and moves well-determined ones by far
 less than their uncertainty.
 
-*Stage 2, the polish* (:mod:`pendulab.calibration._polish`). The smoothing that makes stage 1
-solvable biases it, and a threshold a per cent off decides whether a push breaks the cart away at
+*Stage 2, the polish* (:mod:`pendulab.calibration._polish`). The observer's corrections blur what a
+threshold a per cent off does, which in the replay decides whether a push breaks the cart away at
 all. The answer is polished on the replay of the logs through the plant under the true (switching)
 law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel): scans of ``F1``,
-``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; while the replay
-still misses by more than 2 encoder steps, grids over the pairs that make slanted valleys
-(``v2`` with ``F2``, ``v1`` and ``B``) and the pattern search again; then, while it still misses, robust
+``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; then robust
 1-D scans on the replay (:func:`pendulab.calibration._polish.scan_directions`) along what slow logs
 confuse, each followed by the pattern search: the common scale of the force gain, the forces and the
 drags (quasi-static motion, ``gain V = (B + Beq) v + F``, is blind to it; only the inertia of the
@@ -327,13 +325,11 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
     return np.column_stack(columns)
 
 
-#: Above this replay RMS (encoder steps, the issue's bar) the polish also grids the pairs that make slanted
-#: valleys (the unseen rig's 16 s chirp: 2.15 steps without, 1.63 with, 74 CPU-s either way).
-REFINE_ABOVE_STEPS = 2.0
-REFINE_ROUNDS = 2
-#: Then at most this many rounds of scans along the joint directions and polish (the first whatever the cost), while one lowers the cost by SCAN_GAIN.
+#: At most this many rounds of scans along the joint directions and polish (the first whatever the cost), while one
+#: lowers the cost by SCAN_GAIN and the replay misses by more than SCAN_ABOVE_STEPS encoder steps (the issue's bar).
 SCAN_CYCLES = 3
 SCAN_GAIN = 0.02
+SCAN_ABOVE_STEPS = 2.0
 #: The stick speed ``v1`` is reported bounded, never determined, within its profile's range widened by this
 #: factor either way. It shows only in how a stopping cart creeps once slower than ``v1`` (with ``Beq`` alone
 #: as its drag, SPEC §2), and small moves of the other parameters make up for it: over the corpus's fits
@@ -591,15 +587,7 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
         replays = [_polish.denoised(a) for a in replays]
     polish_iter, work = setup.polish_iter, setup.polish_work
     result = _polish.polish(searched, space, first, max_iter=polish_iter, work=work)
-    target = _cost_of(setup, searched, REFINE_ABOVE_STEPS)
-    for _ in range(REFINE_ROUNDS):
-        if result.cost <= target:
-            break
-        # Still more than a couple of encoder steps: step along the slanted valleys, then search again.
-        theta, cost = _polish.refine_pairs(searched, space, result.theta)
-        if cost >= result.cost:
-            break
-        result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=6)
+    target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
     def walked(result: _polish.Polished) -> _polish.Polished:
         """Along the slip region's corner (v2 with its best F2), and the polish from where it ends: a valley
         the pattern search stops anywhere on (on the unseen rig's calibrate ramp test it stopped at 1.6
