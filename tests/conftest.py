@@ -64,7 +64,7 @@ RAMP_FIT_FILES = frozenset({"test_fit.py", "test_fit_checks.py"})
 #: A fit beside a real-time test makes the rig's answers late: with the fits first, `calibrate --port` failed all three
 #: times (45 of 1000 answers late). xdist's own order, by the number of tests, put test_calibration_cli's fit early.
 FIRST = ("realtime",)
-LAST = ("test_fit_shapes.py", "ramp_test_fit", "test_fit_corpus.py", "test_calibration_cli.py", "test_fit_valleys.py")
+LAST = ("test_fit_shapes.py", "ramp_test_fit", "test_fit_corpus.py", "test_calibration_cli.py", "test_fit_valleys.py", "test_fit_pieces.py")
 
 
 def work_unit(path: Path) -> str:

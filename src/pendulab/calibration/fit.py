@@ -1012,7 +1012,7 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
     if not vectors:
         return params0, (
             "no ramp test to extract the friction from in the logs (fine: any motion will do); starting from the given "
-            "parameters, then, if their answer does not replay the logs, from an estimate made from the logs themselves"
+            "parameters, the lab's defaults and an estimate made from the logs themselves"
         )
     values = {n: float(np.mean([v[n] for v in vectors if n in v])) for n in FRICTION_NAMES if any(n in v for v in vectors)}
     merged = {**dict(zip(FRICTION_NAMES, params0.friction)), **values}

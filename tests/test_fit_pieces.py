@@ -1,0 +1,42 @@
+"""Long logs are searched on pieces and checked on the whole (issue 19): one measure for every decision.
+
+A log longer than ``STAGE_SECONDS`` is searched on its most informative pieces; after the polish, the
+thresholds are scanned once more on the whole log (pushes the pieces lack). The decisions after that (the
+evolution strategy's start and its acceptance, which start values a parameter the log does not identify
+may keep) compare costs on the pieces: the answer carries its cost there. It once carried the whole log's
+cost, which any point's cost on the pieces beats by construction (on a 60 s log the evolution strategy
+"lowered" 7.5e5 to 1.6e5 at the same replay RMS, in 25 CPU-s). Here the limits are made small so that a 4 s
+log is cut into pieces.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from pendulab.calibration import _polish  # private: the fit's stages are what this checks
+from pendulab.calibration import fit as fit_module
+from pendulab.calibration.synthetic import RIGS, synthetic_log
+from pendulab.model.parameters import PlantParameters
+
+
+def test_a_long_log_is_searched_on_pieces_and_the_answer_carries_its_cost_there(monkeypatch):
+    monkeypatch.setattr(fit_module, "STAGE_SECONDS", 2.0)
+    monkeypatch.setattr(fit_module, "PIECE_SECONDS", 1.0)
+    seen = {}
+    evolved = fit_module._evolved
+
+    def spy(setup, answer):
+        seen["setup"], seen["answer"] = setup, answer
+        return evolved(setup, answer)
+
+    monkeypatch.setattr(fit_module, "_evolved", spy)
+    log = synthetic_log("random steps", RIGS["unseen"], duration=4.0, voltage_noise=0.0)
+    fit_module.fit_parameters([log], PlantParameters.preset("none"))
+    setup, answer = seen["setup"], seen["answer"]
+    pieces, whole = answer.searched, answer.replays
+    assert pieces is not whole and sum(a.n for a in pieces) <= 0.6 * sum(a.n for a in whole)  # 2 of 4 s
+    theta = answer.polished.theta
+    on_pieces = float(_polish.costs(pieces, setup.space, theta[None])[0])
+    on_whole = float(_polish.costs(whole, setup.space, theta[None])[0])
+    assert answer.polished.cost == pytest.approx(on_pieces, rel=1e-12)
+    assert on_whole > 1.3 * on_pieces  # the two measures differ: comparing them would decide nothing
