@@ -129,7 +129,7 @@ def test_fit_end_to_end_on_the_calibrate_log(capsys, calibrated, tmp_path):
     _, log = calibrated
     out, plot = tmp_path / "fit.json", tmp_path / "fit.png"
     status, text, _ = run(capsys, "fit", str(log), "--out", str(out), "--plot", str(plot), "--scale-for", "long")
-    assert status == 0 and "residual RMS" in text
+    assert status == 0 and "one-sample prediction RMS" in text and "forward simulation" in text
     cal = load_calibration(out)
     assert abs(cal.Beq / 4.3 - 1) < 0.05 and abs(cal.force_gain - 1) < 0.05
     assert abs(cal.friction[0] / (TRUE[0] * cal.metadata["mass_ratio"]) - 1) < 0.10

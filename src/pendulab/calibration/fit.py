@@ -145,7 +145,7 @@ class FitResult:
     values, initial, uncertainty : dict
         Fitted value, starting value and standard uncertainty of each fitted parameter.
     residual_rms : float
-        RMS of the position residual at the solution (m).
+        RMS of the search's one-sample position predictions (the observer's) at its answer (m).
     params : PlantParameters
         ``params0`` with the fitted values.
     """
@@ -265,7 +265,7 @@ class FitResult:
                 spread = "(start value kept)"
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
-            f"residual RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
+            f"one-sample prediction RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
             f"{self.iterations} observer search iterations, {self.seconds:.2f} s ({self.status})"
         )
         lines.append(
@@ -492,7 +492,7 @@ class _Candidate:
     theta: np.ndarray
     start: np.ndarray  # where the search started (scaled): a start of the polish too
     stats: dict[str, Any]  # the solver's return_status, iter_count, success
-    rms: float  # the search's own residual RMS (m)
+    rms: float  # the search's one-sample prediction RMS (m)
     whole: list[_LogEstimate]
     replays: list[_polish.Anchors]  # the whole logs' restarts for the replay
     others: tuple[np.ndarray, ...] = ()  # the observer search's other starts' answers
