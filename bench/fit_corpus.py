@@ -8,7 +8,7 @@ program on the virtual rig) x four rigs over a wide box (the sticky rig included
 encoder's quantization; the fit starts from the lab's defaults (the logs' own estimate where it can).
 A seeded third of the cases is held out and printed apart (``--held-out``: run only those, at the end).
 
-Columns: the case; the true values' replay (encoder steps RMS, restarted at rests; the better of the
+Columns: the case; the true values' replay (encoder steps RMS, restarted at rests, an upright pendulum also every 0.25 s from settled states; the better of the
 logged and the denoised voltage, as the fit chooses); accepted; each parameter's error (%) and status
 (``d`` determined, ``b`` bounded, ``n`` not identified; ``!`` where a determined value lies more than
 3 of its reported sigmas off); the fitted replay (steps); the fit's CPU time (s, this process and its
@@ -35,7 +35,8 @@ SHORT = {"F1": "F1", "v1": "v1", "F2": "F2", "v2": "v2", "B": "B", "Beq": "Beq",
 
 
 def true_replay_steps(log, true) -> float:
-    """RMS replay error of the true values, restarted at rests, in encoder steps (the fit's own objective)."""
+    """RMS replay error of the true values, restarted at rests (an upright pendulum also every 0.25 s, from states
+    settled at the true values, :func:`pendulab.calibration._polish.settled`), in encoder steps (the fit's own objective)."""
     import numpy as np
 
     from pendulab.calibration import _polish  # private: the fit's own objective (anchors, denoising) for the true values
@@ -47,6 +48,8 @@ def true_replay_steps(log, true) -> float:
     nodes = _initial_states(log, with_pendulum)[:used:10].T
     sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
     raw = _polish.anchors(log, used, nodes, 10, sigma, true.q_x, with_pendulum)
+    if with_pendulum:  # an upright pendulum restarts from states that replay their stretches best, as the fit's do
+        raw = _polish.settled(raw, np.asarray(true.as_vector(), dtype=float), None)
     best = math.inf
     for a in {id(x): x for x in (raw, _polish.denoised(raw))}.values():
         x = replay(np.asarray(true.as_vector(), dtype=float)[None], a.V, a.t, a.x0, a.restarts)[0, :, 0]

@@ -557,7 +557,8 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
             # upright pendulum's replay restarts: much nearer than the smoothed log's speeds.
             every = np.vstack([np.r_[a.x0], states[0]])[:: e.stride]
             e.estimates[:, : every.shape[0]] = every.T
-            replays[j] = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
+            restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
+            replays[j] = _polish.settled(restarted, space.vectors(found.theta[None])[0], names)
     stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
     return _Candidate(found.theta, theta0, stats, rms_observed, whole, replays, others=found.others)
 
