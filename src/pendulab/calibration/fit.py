@@ -20,8 +20,9 @@ logs' own estimate, scans along the slow logs' traps, and Levenberg-Marquardt ag
 narrow bandwidth (:data:`CHOICE_OMEGA`, where the common scale shows) chooses among the starts'
 answers. Long logs are searched on at most :data:`STAGE_SECONDS` of them (the :data:`PIECE_SECONDS`
 windows where the cart stops and starts most), each piece from the observer's state estimate. With the
-pendulum up, open-loop unstable, the observer holds it to the logged angle, and its state estimates
-are where the replay restarts.
+pendulum up, open-loop unstable, the observer holds it to the logged angle, and its state estimates,
+each settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`), are where the
+replay restarts.
 
 *A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
 standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
