@@ -23,7 +23,7 @@ plant with the law's switches as they are (:mod:`pendulab.calibration._replay`):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -149,12 +149,12 @@ def settled(a: Anchors, vector: np.ndarray, free: tuple[str, ...] | None, iterat
     """
     starts = np.array([0, *sorted(a.restarts)], dtype=int)
     bounds = np.r_[starts, a.n]
-    outputs = [0, 2][: a.measured.shape[1]]
+
+    def from_states(S: np.ndarray) -> Anchors:
+        return replace(a, x0=S[0].copy(), restarts={int(k): s.copy() for k, s in zip(starts[1:], S[1:])})
 
     def errors(S: np.ndarray) -> np.ndarray:
-        restarts = {int(k): s for k, s in zip(starts[1:], S[1:])}
-        simulated = replay(vector[None], a.V, a.t, S[0], restarts, free=free)[0][:, outputs]
-        return np.nan_to_num((simulated - a.measured) / a.sigma[None, :], nan=1e6)
+        return np.nan_to_num(replay_errors([from_states(S)], vector[None], free)[0].reshape(a.n, -1), nan=1e6)
 
     def stretch_costs(E: np.ndarray) -> np.ndarray:
         return np.add.reduceat(np.einsum("ij,ij->i", E, E), starts)
@@ -183,8 +183,7 @@ def settled(a: Anchors, vector: np.ndarray, free: tuple[str, ...] | None, iterat
         for w in np.flatnonzero(better):
             states[w], E[bounds[w] : bounds[w + 1]] = trial[w], E_trial[bounds[w] : bounds[w + 1]]
         cost = np.where(better, cost_trial, cost)
-    restarts = {int(k): s.copy() for k, s in zip(starts[1:], states[1:])}
-    return Anchors(a.V, a.t, a.measured, a.sigma, states[0].copy(), restarts, a.segments, a.denoised)
+    return from_states(states)
 
 
 #: Logged voltage noise (V, robust estimate) above which the denoised voltage is also tried.
@@ -310,7 +309,7 @@ def denoised(a: Anchors) -> Anchors:
     return Anchors(denoised_voltage(a.V), a.t, a.measured, a.sigma, a.x0, a.restarts, a.segments, True)
 
 
-def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...]) -> np.ndarray:
+def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...] | None) -> np.ndarray:
     """Weighted replay errors, ``(m, n_errors)``, for parameter sets ``vectors`` ``(m, n_params)``."""
     rows = []
     for a in logs:

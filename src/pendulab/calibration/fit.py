@@ -547,11 +547,11 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
         f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
         f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
     )
-    omega = _observer.OMEGAS[-1]
+    omega, vector = _observer.OMEGAS[-1], space.vectors(found.theta[None])
     for j, (e, a) in enumerate(zip(whole, replays)):
         ny = a.measured.shape[1]
         gain = _observer.observer_gain(omega, e.log.period, outputs=ny)
-        predicted, states = _replay.observe(space.vectors(found.theta[None]), a.V, a.t, a.measured, a.x0, gain, free=names, states=True)
+        predicted, states = _replay.observe(vector, a.V, a.t, a.measured, a.x0, gain, free=names, states=True)
         e.fitted[:] = np.r_[a.x0[0], predicted[0, :, 0]]
         if with_pendulum:
             # The observer's own state estimates (the model at the answer, held to the logged angle) are where an
@@ -559,7 +559,7 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
             every = np.vstack([np.r_[a.x0], states[0]])[:: e.stride]
             e.estimates[:, : every.shape[0]] = every.T
             restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
-            replays[j] = _polish.settled(restarted, space.vectors(found.theta[None])[0], names)
+            replays[j] = _polish.settled(restarted, vector[0], names)
     stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
     return _Candidate(found.theta, theta0, stats, rms_observed, whole, replays, others=found.others)
 
