@@ -25,7 +25,6 @@ _EXPORTS = {
     "load_calibration": "files",
     "save_calibration": "files",
     "RampLog": "logs",
-    "Log": "logs",
     "read_log": "logs",
     "write_log": "logs",
     "Rig": "rig",

@@ -1,15 +1,12 @@
 """The fit's search for the cart alone: least squares on an observer's one-sample predictions.
 
 The replay under the true stick-slip law is what a fit is judged by, but as an objective it is a
-needle: a breakaway a millisecond early shifts the rest of a stretch, so on a sweep a 1 % error in
-``v2`` replays tens of encoder steps off, and the truth's basin is narrower than 1 % in several
-parameters (measured on the corpus' sweep of the unseen rig). The same compiled plant, corrected
-after every sample towards the logged position (:func:`pendulab.calibration._replay.observe`, a
-Luenberger observer of bandwidth ``omega``), forgets such a shift within ``1/omega``: its prediction
-errors are piecewise smooth in the parameters, and along each parameter over +-30 % they fall to a
-single minimum at the true values (the same sweep, ``omega`` 40 and 150 rad/s). A wide bandwidth
-first (a wide basin), then a narrower one (nearer the replay); then the replay's own polish
-(:func:`pendulab.calibration._polish.polish`) takes over from there.
+needle: a breakaway a millisecond early shifts the rest of a stretch (on a sweep, ``v2`` 1 % off
+replays tens of encoder steps off). The same compiled plant, corrected after every sample towards the
+logged position (:func:`pendulab.calibration._replay.observe`, a Luenberger observer of bandwidth
+``omega``), forgets such a shift within ``1/omega``: along each parameter over +-30 % its prediction
+errors fall to a single minimum at the true values. A wide bandwidth first (a wide basin), then a
+narrower one (nearer the replay); then the polish (:func:`pendulab.calibration._polish.polish`).
 
 The search is Levenberg-Marquardt in the logarithms of the scaled parameters, with the Jacobian by
 central differences (one batched observer run for all of them, and one for a ladder of damping
@@ -120,7 +117,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
     return Observed(to_theta(z)[0], cost, it, runs)
 
 
-def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: tuple[float, ...] | None = None) -> Observed:
+def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Observed:
     """The observer search from ``starts`` (scaled values): see the module docstring.
 
     Examples
@@ -128,15 +125,12 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray], omegas: 
     >>> # skipped: compiles the observer (tests/test_fit_observer.py runs it)
     >>> answer = search([anchors], space, [theta0])       # doctest: +SKIP
     """
-    omegas = omegas or OMEGAS
-    tried = [_levenberg_marquardt(logs, space, s, omegas[0], START_ITERATIONS) for s in starts]
+    tried = [_levenberg_marquardt(logs, space, s, OMEGAS[0], START_ITERATIONS) for s in starts]
     best = min(tried, key=lambda o: o.cost)
     runs, iterations = sum(o.runs for o in tried), sum(o.iterations for o in tried)
-    # Robust scans along the axes where slow logs hide other basins (the drag split between B and Beq, with
-    # the slip region's end speed; the common scale of the drive, forces and drags; each parameter over
-    # a factor 9): a local search from the best start can stay where B is folded into Beq, only 0.6 %
-    # worse at the widest bandwidth (a slow triangle wave); at the narrower one it is 8 % worse.
-    omega = omegas[-1]
+    # Robust scans (scan_directions) where slow logs hide other basins: B folded into Beq is only 0.6 % worse at
+    # the widest bandwidth on a slow triangle wave, 8 % at the narrower one.
+    omega = OMEGAS[-1]
     scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: costs(logs, space, thetas, omega))
     best = _levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
     return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs, tuple(o.theta for o in tried))

@@ -3,21 +3,9 @@
 :func:`pendulab.calibration.fit.fit_parameters` first searches an observer of the replay
 (:mod:`pendulab.calibration._observer`), whose corrections blur what a threshold a per cent off does.
 Here the answer is polished on what the fit is finally judged by, a replay of every log through the
-plant with the law's switches as they are (:mod:`pendulab.calibration._replay`):
-
-* **anchors** (:class:`Anchors`): the replay restarts wherever the log says what the state is: late
-  in each rest of the cart (position and speed from a line through the positions there: a stuck cart
-  still creeps in the lab's law); for an upright pendulum, which is open-loop unstable, also every
-  :data:`UNSTABLE_WINDOW` seconds from the fit's state estimate;
-* **polish** (:func:`polish`): scans of the thresholds, then a pattern search on the replay's
-  position (and angle) errors, each step trying all its moves in one batched replay; the searches
-  beside it: scans along joint directions (:func:`scan_directions`), the slip region's corner
-  (:func:`valley`, :func:`walk`) and an evolution strategy (:func:`evolve`);
-* **what the replay says back** (:func:`profile`): the replay cost along each parameter around the
-  answer says whether the logs determine it (the cost rises both ways), only bound it (one way) or do
-  not identify it (flat), and gives its standard uncertainty (where the cost has risen by one effective
-  chi-square unit, the errors' correlation along a replay counted), at least the linearized covariance
-  of the determined parameters (which keeps those that trade off, ``Beq`` and the force gain).
+plant with the law's switches as they are (:mod:`pendulab.calibration._replay`), restarted where the
+log gives the state (:class:`Anchors`): :func:`polish`, and beside it :func:`scan_directions`,
+:func:`valley`, :func:`walk` and :func:`evolve`; :func:`profile` says what the logs determine.
 """
 
 from __future__ import annotations
@@ -40,31 +28,15 @@ UNSTABLE_WINDOW = 0.25
 
 @dataclass
 class Anchors:
-    """One log prepared for replays: its data, first state and restarts.
+    """One log prepared for replays: its data, first state and restarts (the arguments of :func:`replay`)."""
 
-    Attributes
-    ----------
-    V, t : array (n,)
-        The voltage and times of the steps (the log without its last sample).
-    measured : array (n, n_out)
-        Logged position (and angle) after each step.
-    sigma : array (n_out,)
-        Measurement noise, the weights of the errors.
-    x0 : array (4,)
-        State at the first sample.
-    restarts : dict
-        ``{k: state}`` at which the replay continues from a known state.
-    segments : array
-        Start sample of each stretch between rests, for cutting the log into parts.
-    """
-
-    V: np.ndarray
+    V: np.ndarray  # (n,) the steps' voltage and times (the log without its last sample)
     t: np.ndarray
-    measured: np.ndarray
-    sigma: np.ndarray
-    x0: np.ndarray
-    restarts: dict[int, np.ndarray]
-    segments: np.ndarray
+    measured: np.ndarray  # (n, n_out) logged position (and angle) after each step
+    sigma: np.ndarray  # (n_out,) measurement noise, the weights of the errors
+    x0: np.ndarray  # (4,) state at the first sample
+    restarts: dict[int, np.ndarray]  # {k: state}: the replay continues from a known state
+    segments: np.ndarray  # start sample of each stretch between rests, for cutting the log into parts
     denoised: bool = False  # V is the logged voltage through denoised_voltage
 
     @property
@@ -420,13 +392,6 @@ def directions_of(names: tuple[str, ...]) -> tuple[str, ...]:
 SLIP_SPEEDS = (0.01, 0.03, 0.06, 0.12)
 
 
-def _logit_share(space: Space, theta: np.ndarray) -> float:
-    """``log(B / Beq)``: the share of ``B`` in the drag in logit units."""
-    i, j = space.names.index("B"), space.names.index("Beq")
-    b, e = max(theta[i] * space.scales[i], 1e-9), max(theta[j] * space.scales[j], 1e-9)
-    return math.log(b / e)
-
-
 def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans: tuple[float, ...] = (math.log(3.0), math.log(3.0) / 8),
                     points: int = 16, rounds: int = 2, cost_of: Callable[[np.ndarray], np.ndarray] | None = None) -> Polished:
     """Robust 1-D scans of the replay cost (or of ``cost_of(thetas)``) along every direction of :func:`directions_of`, ``rounds`` times.
@@ -446,8 +411,10 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
             for span in spans:
                 coarse = span == spans[0]
                 # Only the moved points are run (the current one's cost is known): 16 of them fill one compiled batch.
-                if d == "split" and coarse:  # every share of B in the drag, from 1 % to 99 %
-                    trials = np.array([moved(space, theta, d, x - _logit_share(space, theta)) for x in np.linspace(-4.6, 4.6, points)])
+                if d == "split" and coarse:  # every share of B in the drag, from 1 % to 99 % (logit: log(B / Beq))
+                    i, j = names.index("B"), names.index("Beq")
+                    share = math.log(max(theta[i] * space.scales[i], 1e-9) / max(theta[j] * space.scales[j], 1e-9))
+                    trials = np.array([moved(space, theta, d, x - share) for x in np.linspace(-4.6, 4.6, points)])
                 else:
                     X = np.linspace(-span, span, points) * (4.0 if d == "split" else 1.0 if d == "scale" else 2.0)
                     trials = np.array([moved(space, theta, d, x) for x in X])
@@ -482,6 +449,8 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
     return Polished(theta, cost, start, rounds, replays)
 
 
+#: Pairs of parameters that trade off, moved together (diagonally) by :func:`polish`.
+PAIRS = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain"))
 #: Pairs scanned on a grid (a factor 9 both ways each): leaving the slip region happens at
 #: ``min(F2, (B + Beq) v2)`` of drive, so a wrong ``F2`` is right only with its own ``v2``.
 GRID_PAIRS = (("F2", "v2"),)
@@ -492,26 +461,22 @@ def polish(
     space: Space,
     theta: np.ndarray,
     max_iter: int = 12,
-    first_step: float = 0.02,
-    min_step: float = 1e-3,
     work: float = math.inf,
     scan: tuple[str, ...] = ("F1", "F2", "v2"),
     scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015),
-    scan_points: int = 15,
     scan_rounds: int = 2,
-    pairs: tuple[tuple[str, str], ...] = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain")),
 ) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
 
     The replay's error is not smooth in the parameters: a breakaway that happens or not is a jump, so
     derivatives (even finite differences) mislead. The parameters ``scan`` (the thresholds whose
     jumps dominate) are first scanned one by one over ``scan_spans`` (relative, coarse then fine,
-    ``scan_points`` factors each, log-spaced within ``1 + span`` either way: a factor 3 first, for a
+    15 factors each, log-spaced within ``1 + span`` either way: a factor 3 first, for a
     smoothed answer caught in a wrong basin; ``scan_rounds`` times, as they interact). Each iteration tries every
-    parameter up and down by a relative ``radius``, the four diagonal moves of each of ``pairs``
-    (parameters that trade off: the slip region's corner ``F2, v2``, the two forces, and ``Beq``
+    parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of
+    :data:`PAIRS` (parameters that trade off: the slip region's corner ``F2, v2``, the two forces, and ``Beq``
     against the force gain, which both set a steady speed) and the last good move, all in one batched replay, and keeps the
-    best if it lowers the cost; otherwise the radius shrinks threefold, down to ``min_step``. The
+    best if it lowers the cost; otherwise the radius shrinks threefold, down to 0.1 %. The
     order constraints ``F1 <= F2`` and ``v1 <= v2`` and the bounds are kept by projection. It stops
     early once it has replayed ``work`` samples (parameter sets x samples), a bound that, unlike a
     clock, gives the same answer on a busy machine.
@@ -527,20 +492,17 @@ def polish(
     theta = project(np.asarray(theta, dtype=float).copy())
     r = residuals(theta[None])[0]
     cost = start_cost = float(r @ r)
-    radius, replays, it, n = first_step, 1, 0, len(theta)
-    # The thresholds first: whether a push breaks the cart away (F1) or slides it freely (F2) is a
-    # jump in the replay, and a search's threshold a few per cent off misses whole motions.
-    # A scan along each (coarse, then fine around the best), one batched replay per scan; the answer is
-    # kept if it is better. (A coarser sub-step than the plant's, 0.5 ms, is three times faster, but it
-    # moves the replay by about an encoder step and sent a log of steps into a worse basin.)
+    radius, replays, it, n = 0.02, 1, 0, len(theta)
+    # The thresholds first (see the docstring), one batched replay per scan. (A coarser sub-step than the plant's,
+    # 0.5 ms, is three times faster, but it moved the replay by about an encoder step: a log of steps went astray.)
     scanned = theta
     for name in [n_ for n_ in scan if n_ in names] * scan_rounds:
         j = names.index(name)
         for span in scan_spans:
             if done["samples"] > work:
                 break
-            trials = np.tile(scanned, (scan_points, 1))
-            trials[:, j] = scanned[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), scan_points))
+            trials = np.tile(scanned, (15, 1))
+            trials[:, j] = scanned[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), 15))
             trials = np.array([project(th) for th in trials])
             R = residuals(trials)
             replays += 1
@@ -558,7 +520,7 @@ def polish(
         # all in one batched replay.
         size = radius * np.maximum(np.abs(theta), 1e-2)
         diagonal = []
-        for a_, b_ in pairs:
+        for a_, b_ in PAIRS:
             if a_ in names and b_ in names:
                 i_, j_ = names.index(a_), names.index(b_)
                 for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
@@ -577,16 +539,13 @@ def polish(
         else:
             momentum = np.zeros(n)
             radius /= 3.0
-            if radius < min_step:
+            if radius < 1e-3:
                 break
     return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=replays)
 
 
-#: The slip region's corner: the cart leaves the slip region at ``F2`` of drive or at ``v2`` of speed,
-#: whichever comes first. One moved alone shifts every such exit; the other moved with it puts them back,
-#: so the replay's cost runs in a narrow valley along the pair (on the unseen rig's calibrate ramp test,
-#: ``v2`` 5 % off and ``F2`` 0.5 % replayed as well as the truth, either one moved alone to the truth's value 600 times worse).
-#: :func:`valley` follows it.
+#: The slip region's corner: the cart leaves it at ``F2`` of drive or ``v2`` of speed, whichever comes first, so
+#: one moved alone shifts every exit and the replay's cost runs in a narrow valley along the pair (:func:`valley`).
 PARTNERS = {"F2": "v2", "v2": "F2"}
 #: How far (log) a partner is scanned: a force finely, a speed widely (along the corner 1 % of ``F2`` is
 #: worth about 12 % of ``v2``).
@@ -657,8 +616,7 @@ def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, se
     """CMA-ES (:mod:`cma`) on the replay cost around ``theta`` (of cost ``cost``), in log coordinates.
 
     Derivative-free and with a population per step, it steps over the replay cost's small jumps, and it
-    learns the joint moves that the pattern search's fixed directions miss (on the sticky rig's chirp the
-    pattern search and the walk stopped at 2.3 encoder steps; 640 replays of this found 0.94). Seeded, with
+    learns the joint moves that the pattern search's fixed directions miss (see fit.EVOLVE_ABOVE_STEPS). Seeded, with
     its samples rounded (1e-9 in log units) so that the linear algebra's last bits, which differ between
     CPUs, do not change what is replayed; numpy's global random state is restored. Returns the best point
     and its cost (``theta`` and ``cost`` if none is lower).
@@ -684,9 +642,8 @@ PROFILE_OFFSETS = (0.003, 0.01, 0.03, 0.1, 0.3, 0.7)
 DETERMINED, BOUNDED, NOT_IDENTIFIED = "determined", "bounded", "not identified"
 #: The friction law's thresholds: the replay cost is a staircase in each (see :func:`profile`).
 THRESHOLDS = ("F1", "v1", "F2", "v2")
-#: A parameter whose uncertainty exceeds this fraction of its value is reported as bounded, not determined:
-#: known only to a fifth of itself, it is a range (``allowed``), not a value (on a log of random steps of the
-#: unseen rig, F1 -15 % off came out "determined" to +-30 %).
+#: A parameter uncertain by more than this fraction of its value is only bounded (a range, ``allowed``): on a log
+#: of random steps of the unseen rig, F1 -15 % off came out "determined" to +-30 %.
 MAX_RELATIVE_SIGMA = 0.2
 
 
@@ -765,13 +722,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     offsets = np.array(PROFILE_OFFSETS)
     joint = [d for d in directions_of(space.names) if d in ("scale", "split")]
     widths = {d: 4.0 if d == "split" else 1.0 for d in joint}
-    trials = [theta]
-    for j in range(n):
-        for sign in (1.0, -1.0):
-            for o in offsets:
-                th = theta.copy()
-                th[j] = theta[j] * math.exp(sign * o)
-                trials.append(th)
+    trials = [theta] + [np.where(np.arange(n) == j, theta[j] * math.exp(sign * o), theta) for j in range(n) for sign in (1.0, -1.0) for o in offsets]
     for d in joint:
         trials += [moved(space, theta, d, sign * o * widths[d]) for sign in (1.0, -1.0) for o in offsets]
     size = step * np.abs(theta)
@@ -784,9 +735,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     # their autocorrelation shows (a threshold crossed or not shifts a whole stretch).
     threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
     m = len(offsets)
-    # F2 or v2 moved alone leaves the corner's valley (see PARTNERS): from the first offset where the move alone
-    # rises above the threshold, the move with the partner's best value counts too, offset by offset while
-    # that stays below (all such chains in one batched replay per round).
+    # F2 and v2 (PARTNERS): the move with the partner's best value, as the docstring says (one batched replay per round).
     chains = []
     for j, name in enumerate(space.names):
         if name in PARTNERS and PARTNERS[name] in space.names:
@@ -801,11 +750,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         chains = [(j, i + 1, end) for (j, i, end), c in zip(chains, found) if c <= cost0 + threshold and i + 1 < end]
 
     def reach(first: int, staircase: bool = False) -> tuple[float, float]:
-        """How far (offset units) the cost stays below the threshold up and down, from trial ``first``.
-
-        Interpolated between the offsets; for a ``staircase`` (a threshold: the cost jumps where a push
-        breaks the cart away or not) the first offset seen above, since a jump has no slope to interpolate.
-        """
+        """How far (offset units) the cost stays below the threshold up and down, from trial ``first`` (see above)."""
         out = []
         for side in range(2):
             c = costs[first + side * m : first + (side + 1) * m]

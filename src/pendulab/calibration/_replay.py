@@ -5,14 +5,9 @@ The fit's last stage and its check both replay a log's voltage through the plant
 the plant's own RK4 sub-step (:data:`pendulab.model.plant.MAX_SUBSTEP`), for one or several
 parameter sets at once.
 
-A replay may *restart*: at chosen samples the simulated state is replaced by a known one. A cart
-that rests on the track has a known state (the logged position, at rest), so a replay restarted at
-every rest judges each motion on its own instead of carrying a millimetre lost in one breakaway to
-the end of the log; an upright pendulum, open-loop unstable, restarts from the fit's state estimate.
-
-The step, wrapped with the restart, is unrolled over a fixed chunk of samples (``mapaccum``), mapped
-over parameter sets and compiled to C once per machine (cached by :mod:`pendulab.native`); a log
-is replayed chunk by chunk.
+A replay may *restart* from a known state at chosen samples (:class:`pendulab.calibration._polish.Anchors`).
+The step is unrolled over a fixed chunk of samples (:func:`_chunk_function`), mapped over parameter sets
+and compiled to C once per machine (cached by :mod:`pendulab.native`).
 """
 
 from __future__ import annotations
@@ -56,7 +51,7 @@ def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1",
 
 
 @lru_cache(maxsize=None)
-def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], compile: bool, observer: int = 0) -> ca.Function:
+def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
     """One chunk of :data:`CHUNK` samples for ``n_sets`` parameter sets, compiled to C where it can be.
 
     The replay: ``F(s0[4 x m], V[1 x C], t[1 x C], restart[1 x C], s_restart[4 x C], theta[n_free x m], h)
@@ -95,7 +90,7 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
     tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed) + (("observer", observer, "states") if observer else ())).encode()).hexdigest()[:10]
     name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
     shared = [1, 2, 3, 4, 6]  # everything but the state and the parameters is the same for every set
-    if compile and n_sets > 1:
+    if n_sets > 1:
         # The parameter sets in parallel on the machine's cores (OpenMP in the generated C). CasADi's own
         # build has no OpenMP and warns about its evaluator, which is not used here: the warning is dropped.
         with contextlib.redirect_stderr(io.StringIO()):
@@ -104,11 +99,8 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
         if library:
             return ca.external(name, library)
     f = chunk.map(name, "serial", n_sets, shared, [])
-    if compile:
-        library, _ = _compile([f], name, optimize="-O2", flags=EXACT_MATH)
-        if library:
-            return ca.external(name, library)
-    return f
+    library, _ = _compile([f], name, optimize="-O2", flags=EXACT_MATH)
+    return ca.external(name, library) if library else f
 
 
 def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, ...], tuple[float, ...]]:
@@ -119,14 +111,28 @@ def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, .
     return free_idx, tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vector))
 
 
-def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str], max_substep: float = MAX_SUBSTEP) -> None:
+def _inputs(vectors: np.ndarray, V: np.ndarray, t: np.ndarray, free: Sequence[str] | None, observer: int = 0) -> tuple:
+    """What :func:`replay` and :func:`observe` share: the chunk function for ``vectors``, the voltage and times
+    padded to whole chunks, the free parameters of every set (flat) and the sub-step."""
+    n = len(V)
+    period = float(t[1] - t[0]) if n > 1 else 1e-3
+    n_sub = substeps(period, MAX_SUBSTEP)
+    free_idx, fixed = _split(vectors[0], free)
+    size = -(-n // CHUNK) * CHUNK
+    Vp, tp = np.zeros(size), t[0] + period * np.arange(size)
+    Vp[:n], tp[:n] = V, t
+    P = np.ascontiguousarray(vectors[:, free_idx]).ravel()
+    return _chunk_function(n_sub, len(vectors), free_idx, fixed, observer), Vp, tp, P, np.array([period / n_sub])
+
+
+def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> None:
     """Build (or load) the compiled replays for every width in :data:`SET_COUNTS` ahead of use."""
     free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
     for period in sorted(set(periods)):
         for m in SET_COUNTS:
-            _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True)
+            _chunk_function(substeps(period, MAX_SUBSTEP), m, free_idx, fixed)
             if m > 1:  # the fit's search runs on the observer (pendulab.calibration._observer)
-                _chunk_function(substeps(period, max_substep), m, free_idx, fixed, True, 2 if params.Mp > 0 else 1)
+                _chunk_function(substeps(period, MAX_SUBSTEP), m, free_idx, fixed, 2 if params.Mp > 0 else 1)
 
 
 def replay(
@@ -137,8 +143,6 @@ def replay(
     restarts: dict[int, np.ndarray] | None = None,
     *,
     free: Sequence[str] | None = None,
-    max_substep: float = MAX_SUBSTEP,
-    compile: bool = True,
 ) -> np.ndarray:
     """States after each logged sample for one or several parameter sets, ``(m, n, 4)``.
 
@@ -157,8 +161,6 @@ def replay(
     free : sequence of str, optional
         The parameters that differ between the sets (default: all). The others take the first set's
         values and are compiled in as constants, which makes the replay faster.
-    compile : bool
-        Use the compiled C function (built once per machine); False evaluates in CasADi's VM.
 
     Examples
     --------
@@ -176,20 +178,11 @@ def replay(
         # A few compiled widths serve any number of sets: pad with copies of the first, or split.
         width = next((w for w in SET_COUNTS if w >= m), SET_COUNTS[-1])
         if m > width:
-            return np.concatenate([replay(vectors[i : i + width], V, t, x0, restarts, free=free, max_substep=max_substep, compile=compile)
-                                   for i in range(0, m, width)])
+            return np.concatenate([replay(vectors[i : i + width], V, t, x0, restarts, free=free) for i in range(0, m, width)])
         padded = np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))])
-        return replay(padded, V, t, x0, restarts, free=free, max_substep=max_substep, compile=compile)[:m]
-    period = float(t[1] - t[0]) if n > 1 else 1e-3
-    n_sub = substeps(period, max_substep)
-    free_idx, fixed = _split(vectors[0], free)
-    f = _chunk_function(n_sub, m, free_idx, fixed, bool(compile))
-    n_chunks = -(-n // CHUNK)
-    size = n_chunks * CHUNK
-    Vp = np.zeros(size)
-    Vp[:n] = V
-    tp = t[0] + period * np.arange(size)
-    tp[:n] = t
+        return replay(padded, V, t, x0, restarts, free=free)[:m]
+    f, Vp, tp, P, h = _inputs(vectors, V, t, free)
+    size, n_chunks = len(Vp), len(Vp) // CHUNK
     rp = np.zeros(size)
     srp = np.zeros((4, size))
     for k, state in (restarts or {}).items():
@@ -201,8 +194,6 @@ def replay(
     # (4 x m) matrix is a (m, 4) array here, and the result (4 x CHUNK*m) is (m, CHUNK, 4).
     state = np.tile(np.asarray(x0, dtype=float), m)
     V_in, t_in, r_in, sr_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(CHUNK), np.empty(4 * CHUNK)
-    P = np.ascontiguousarray(vectors[:, free_idx]).ravel()
-    h = np.array([period / n_sub])
     result = np.empty(4 * CHUNK * m)
     buffer, evaluate = f.buffer()
     for i, a in enumerate((state, V_in, t_in, r_in, sr_in, P, h)):
@@ -220,11 +211,11 @@ def replay(
     return out[:, :n, :]
 
 
-def observer_compiled(params: PlantParameters, period: float, free: Sequence[str], max_substep: float = MAX_SUBSTEP) -> bool:
+def observer_compiled(params: PlantParameters, period: float, free: Sequence[str]) -> bool:
     """Whether :func:`observe` runs as compiled C here (else in CasADi's virtual machine, many times slower)."""
     free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
     outputs = 2 if params.Mp > 0 else 1
-    return _chunk_function(substeps(period, max_substep), SET_COUNTS[1], free_idx, fixed, True, outputs).class_name() == "External"
+    return _chunk_function(substeps(period, MAX_SUBSTEP), SET_COUNTS[1], free_idx, fixed, outputs).class_name() == "External"
 
 
 def observe(
@@ -236,8 +227,6 @@ def observe(
     gain: np.ndarray,
     *,
     free: Sequence[str] | None = None,
-    max_substep: float = MAX_SUBSTEP,
-    compile: bool = True,
     states: bool = False,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Outputs predicted one sample ahead by an observer of the plant, ``(m, n)`` (``(m, n, 2)`` for two outputs).
@@ -266,25 +255,17 @@ def observe(
     width = next((w for w in SET_COUNTS[1:] if w >= m), SET_COUNTS[-1])
     if m != width:
         parts = [vectors[i : i + width] for i in range(0, m, width)] if m > width else [np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))])]
-        done = [observe(q, V, t, y, x0, gain, free=free, max_substep=max_substep, compile=compile, states=True) for q in parts]
+        done = [observe(q, V, t, y, x0, gain, free=free, states=True) for q in parts]
         predicted, corrected = np.concatenate([d[0] for d in done])[:m], np.concatenate([d[1] for d in done])[:m]
         return (predicted, corrected) if states else predicted
-    period = float(t[1] - t[0]) if n > 1 else 1e-3
-    n_sub = substeps(period, max_substep)
-    free_idx, fixed = _split(vectors[0], free)
-    f = _chunk_function(n_sub, m, free_idx, fixed, bool(compile), ny)
-    n_chunks = -(-n // CHUNK)
-    size = n_chunks * CHUNK
-    Vp, yp = np.zeros(size), np.zeros((size, ny))
-    Vp[:n], yp[:n] = V, Y
-    tp = t[0] + period * np.arange(size)
-    tp[:n] = t
+    f, Vp, tp, P, h = _inputs(vectors, V, t, free, ny)
+    size, n_chunks = len(Vp), len(Vp) // CHUNK
+    yp = np.zeros((size, ny))
+    yp[:n] = Y
     # In place, as in replay(): column-major (4 x m) is (m, 4) here; the outputs (ny x CHUNK*m) are (m, CHUNK, ny).
     state = np.tile(np.asarray(x0, dtype=float), m)
     V_in, t_in, y_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(ny * CHUNK)
     g = np.asarray(gain, dtype=float).reshape(4, ny).T.ravel().copy()  # column-major (4 x ny)
-    P = np.ascontiguousarray(vectors[:, free_idx]).ravel()
-    h = np.array([period / n_sub])
     end, predicted, corrected = np.empty(4 * m), np.empty(ny * CHUNK * m), np.empty(4 * CHUNK * m)
     buffer, evaluate = f.buffer()
     for i, a in enumerate((state, V_in, t_in, y_in, g, P, h)):

@@ -4,17 +4,8 @@ The fit's search has local minima, and a start from the lab's defaults lands in 
 when the rig is far from them (three times the breakaway force, five times the slip drag). Two
 things any log of a moving cart shows, without recognising a ramp test:
 
-* **the drive and the drag** (:func:`drive_and_drag`): where the cart slides fast it is past the
-  stick-slip law (``F_friction = 0``), so ``Mc*a = force_gain*(K*V - b*v) - Beq*v`` holds with the
-  speed ``v`` and acceleration ``a`` of the smoothed log. That is linear in ``force_gain`` and
-  ``Beq``: a least-squares fit on the fastest samples, trimmed of those that do not fit (the slip
-  region's drag, the edges of a step);
-* **the breakaway force** (:func:`breakaway_bounds`, :func:`breakaway_voltage`): at every rest of the
-  cart, the largest voltage it held without moving is a lower bound of ``F1``, and the voltage it broke
-  away at is an upper bound;
-* **the slip region** (:func:`slip_region`): with the drive and ``Beq`` known, the friction each sample
-  needed is ``B v`` in the slip region and 0 beyond it, so ``B`` and ``v2`` can be read off a log that
-  shows both.
+the drive and the drag from fast motion (:func:`drive_and_drag`), the breakaway force from the rests
+(:func:`breakaway_bounds`, :func:`breakaway_voltage`) and the slip region (:func:`slip_region`).
 
 Examples
 --------
@@ -77,14 +68,13 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
 
     K, b = motor_constants(params.with_values(force_gain=1.0))
     Mc = params.lumped_cart_mass
-    rows, rhs, volts = [], [], []
+    rows, rhs = [], []
     for log in logs:
         v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
         # Not where the amplifier saturates, and not the first or last samples of the smoothing.
         edge = max(5, int(round(SMOOTHING / log.period)))
         keep = (np.abs(log.V) < 0.98 * params.V_max) & (np.arange(len(log)) >= edge) & (np.arange(len(log)) < len(log) - edge)
         rows.append(np.column_stack([K * V - b * v, -v])[keep])
-        volts.append(V[keep])
         rhs.append(Mc * a[keep])
     A, y = np.concatenate(rows), np.concatenate(rhs)
     # Moving: faster than the encoder's quantization can fake through the smoothing window.
@@ -99,7 +89,6 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     prior = np.array([params.force_gain, params.Beq])
     scale = np.sqrt(np.mean(A**2, axis=0)) + 1e-12
     use = speed >= max(np.quantile(speed, 1.0 - SEED_FRACTION), SEED_SPEED_SHARE * np.quantile(speed, 0.995))
-    solution = prior
     for _ in range(6):
         ridge = 1e-3 * np.count_nonzero(use)
         M = np.vstack([A[use] / scale, math.sqrt(ridge) * np.eye(2)])
@@ -187,9 +176,8 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
 
 
 def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:
-    """Over the logs (without the smoothing's edges): the speed ``|v|``, the friction each sample needed
-    against its motion ``R = gain*(K*V - b*v) - Beq*v - Mc*a`` (signed along ``v``), the motor's force
-    ``|gain*(K*V - b*v)|`` and the inertia's ``|Mc*a|``."""
+    """Over the logs (without the smoothing's edges): ``|v|``, the friction ``R`` each sample needed (see
+    :func:`slip_region`; signed along ``v``), the motor's force ``|gain*(K*V - b*v)|`` and ``|Mc*a|``."""
     from pendulab.calibration.extract import motor_constants
 
     K, b = motor_constants(params.with_values(force_gain=1.0))

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -112,9 +112,6 @@ class PushEstimate:
     Beq: float | None = None
     decay_rms: float | None = None  # residual of the coasting fit (m)
 
-    def as_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
-
 
 @dataclass(frozen=True)
 class FrictionEstimate:
@@ -142,10 +139,6 @@ class FrictionEstimate:
     Beq: float | None
     pushes: tuple[PushEstimate, ...]
     notes: tuple[str, ...] = field(default=())
-
-    @property
-    def iterations(self) -> int:
-        return sum(1 for p in self.pushes if p.kind == "ramp" and p.F1 is not None)
 
     def to_calibration(self, **metadata: Any) -> Calibration:
         """A :class:`Calibration` holding ``friction`` and this estimate's measurement record."""
@@ -267,16 +260,15 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", (OptimizeWarning, RuntimeWarning))
         for v2 in (0.02, 0.05, 0.1):
-            for v1 in (v2 / 10,):
-                theta0 = np.clip([x[0], max(u_guess, 2e-4), Beq0, 20.0, v2, v1], lower, upper)
-                try:
-                    fit = least_squares(
-                        residual, theta0, bounds=(lower, upper), x_scale=[1e-3, 0.1, 1.0, 10.0, 0.01, 0.001], max_nfev=400
-                    )
-                except (ValueError, FloatingPointError):
-                    continue
-                if best is None or fit.cost < best.cost:
-                    best = fit
+            theta0 = np.clip([x[0], max(u_guess, 2e-4), Beq0, 20.0, v2, v2 / 10], lower, upper)
+            try:
+                fit = least_squares(
+                    residual, theta0, bounds=(lower, upper), x_scale=[1e-3, 0.1, 1.0, 10.0, 0.01, 0.001], max_nfev=400
+                )
+            except (ValueError, FloatingPointError):
+                continue
+            if best is None or fit.cost < best.cost:
+                best = fit
     if best is None:
         return None, math.inf
     rms = float(np.sqrt(2 * best.cost / len(t)))
@@ -285,12 +277,8 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
 
 # ---------------------------------------------------------------------- F2 probe fit
 def _fit_F2(log: RampLog, lo: int, hi: int, params: PlantParameters, F_low: float, F_high: float) -> float | None:
-    """Best ``F2`` in ``[F_low, F_high]`` for the samples ``lo:hi`` (cart at rest at ``lo``).
-
-    The window is simulated with the CasADi plant for candidate values (coarse-to-fine grid); the
-    candidate whose positions match the log best is kept. ``None`` if the window cannot tell, i.e.
-    the best candidate is not much better than ``F2 = F_high`` (the drag regime never left by force).
-    """
+    """Best ``F2`` in ``[F_low, F_high]`` for the samples ``lo:hi`` (cart at rest at ``lo``), by a coarse-to-fine
+    grid (see the module docstring); ``None`` if it is not much better than ``F2 = F_high``."""
     from pendulab.calibration._simulation import simulate_many
 
     if hi - lo < 20 or F_high <= F_low:
@@ -367,6 +355,7 @@ def extract_friction(
     notes: list[str] = []
     estimates: list[PushEstimate] = []
     onsets: dict[int, int] = {}  # push start -> last sample at rest before the breakaway
+    w = max(2, int(round(0.02 / dt)))  # 20 ms
     for push in pushes:
         direction = 1 if push.rate > 0 else -1
         kind = "ramp" if push in ramps else "probe"
@@ -375,7 +364,6 @@ def extract_friction(
         threshold = max(3 * q, 6 * noise, 1e-6)
         # Breakaway: the cart covers `threshold` within 20 ms (a slow glide of a not quite stopped
         # cart does not), in the direction of the voltage.
-        w = max(2, int(round(0.02 / dt)))
         lo, hi = max(push.start - w, 0), push.release
         if hi - lo <= w:
             continue
@@ -416,14 +404,11 @@ def extract_friction(
             "the log is too short or the ramps stop too early"
         )
 
-    def collect(name: str, kinds: tuple[str, ...] = ("ramp", "probe")) -> list[float]:
-        return [getattr(e, name) for e in estimates if e.kind in kinds and getattr(e, name) is not None]
-
     measured: dict[str, float] = {}
     spread: dict[str, float] = {}
     counts: dict[str, int] = {}
     for name in ("F1", "v1", "v2", "B", "Beq"):
-        values_ = collect(name)
+        values_ = [getattr(e, name) for e in estimates if getattr(e, name) is not None]
         counts[name] = len(values_)
         if values_:
             measured[name] = float(np.mean(values_))
@@ -450,7 +435,6 @@ def extract_friction(
                 continue
             lo = max(push.start, onsets[push.start] - 50)
             # Once the cart is faster than v2 the drag is gone whatever F2 is: nothing more to learn.
-            w = max(2, int(round(0.02 / dt)))
             speed = np.abs(x[lo + w : hi] - x[lo : hi - w]) / (w * dt)
             fast = np.flatnonzero(speed > 1.2 * measured["v2"])
             hi = lo + w + int(fast[0]) + 50 if fast.size else hi
@@ -462,9 +446,7 @@ def extract_friction(
         if F2 is None:
             continue
         found[kind].append(F2)
-        for i, est in enumerate(estimates):
-            if abs(est.t_start - t[push.start]) < 0.5 * dt:
-                estimates[i] = PushEstimate(**{**est.as_dict(), "F2": F2})
+        estimates = [replace(e, F2=F2) if abs(e.t_start - t[push.start]) < 0.5 * dt else e for e in estimates]
     # A slow ramp resolves F2 far better than a probe (whose force jumps by rate*dt per sample).
     F2_values = found["ramp"] or found["probe"]
     counts["F2"] = len(F2_values)
@@ -474,9 +456,7 @@ def extract_friction(
     else:
         measured["F2"] = max(params.F2, measured["F1"])
         spread["F2"] = 0.0
-        notes.append(
-            f"F2 not observed (no probe left the drag regime by force); kept {measured['F2']:g} N as measured (>= F1)"
-        )
+        notes.append(f"F2 not observed (no probe left the drag regime by force); kept {measured['F2']:g} N as measured (>= F1)")
 
     raw = tuple(measured[n] for n in FRICTION_NAMES)
     scale = {"F1": mass_ratio, "F2": mass_ratio}

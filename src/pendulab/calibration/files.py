@@ -106,12 +106,8 @@ class Calibration:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (see the module docstring)."""
-        data: dict[str, Any] = {"format": FORMAT, "version": VERSION, "friction": dict(zip(FRICTION_NAMES, self.friction))}
-        for name in FITTED_NAMES:
-            if getattr(self, name) is not None:
-                data[name] = getattr(self, name)
-        data["metadata"] = dict(self.metadata)
-        return data
+        fitted = {n: getattr(self, n) for n in FITTED_NAMES if getattr(self, n) is not None}
+        return {"format": FORMAT, "version": VERSION, "friction": dict(zip(FRICTION_NAMES, self.friction)), **fitted, "metadata": dict(self.metadata)}
 
     @classmethod
     def from_dict(cls, data: Any, source: str = "calibration") -> "Calibration":
@@ -229,12 +225,7 @@ OLD_LAB_V2 = 0.1
 
 
 def _load_mat(path: Path) -> Calibration:
-    """The old lab's ``.mat`` calibration (MAT v5 or v7.3), read as that lab's code read it.
-
-    One numeric variable of any name (the lab used ``defaultData`` and ``measuredData``): four numbers
-    are ``[F1, v1, B, unused]`` with ``F2 = 4 F1`` and ``v2 = 0.1 m/s``; five numbers are pendulab's
-    own ``[F1, v1, F2, v2, B]``. A variable named like ``fric`` wins when there are several.
-    """
+    """The old lab's ``.mat`` calibration, read as that lab's code read it (see the module docstring)."""
     import numpy as np
 
     from pendulab.calibration.logs import read_mat_variables
@@ -297,9 +288,8 @@ def save_calibration(calibration: Calibration, path: str | os.PathLike[str]) -> 
     path = Path(path)
     if path.is_dir():
         raise CalibrationError(f"--out {path} is a directory; give a file name such as {path / 'calibration.json'}")
-    folder = path.parent if str(path.parent) else Path(".")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise CalibrationError(f"cannot create the folder for {path}: {exc.strerror or exc}") from None
     text = json.dumps(calibration.to_dict(), indent=2, allow_nan=False) + "\n"

@@ -11,45 +11,23 @@ stick-slip law, compiled to C (:mod:`pendulab.calibration._replay`), several par
 Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a
 check replays the whole logs with it.
 
-*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`). The replay is a needle as an
-objective (a breakaway a millisecond early shifts the rest of a stretch); the same compiled plant
-corrected towards the logged position (and angle) after every sample (an observer) forgets such a
-shift, and its one-sample prediction errors fall to one minimum at the true values along each
-parameter. Levenberg-Marquardt on them from the start, the lab's defaults and (the cart alone) the
-logs' own estimate, scans along the slow logs' traps, and Levenberg-Marquardt again; an observer of
-narrow bandwidth (:data:`CHOICE_OMEGA`, where the common scale shows) chooses among the starts'
-answers. Long logs are searched on at most :data:`STAGE_SECONDS` of them (the :data:`PIECE_SECONDS`
-windows where the cart stops and starts most), each piece from the observer's state estimate. With the
-pendulum up, open-loop unstable, the observer holds it to the logged angle, and its state estimates,
-each settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`), are where the
-replay restarts.
+*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the
+one-sample prediction errors of an observer of the replay (the replay itself is a needle as an
+objective), from the start, the lab's defaults and (the cart alone) the logs' own estimate; an
+observer of narrow bandwidth (:data:`CHOICE_OMEGA`) chooses among their answers. Long logs are
+searched on at most :data:`STAGE_SECONDS` of them (:data:`PIECE_SECONDS` windows where the cart stops
+and starts most). An upright pendulum's replay restarts from the observer's state estimates, each
+settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`).
 
-*A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter, i.e. a prior with a
-standard deviation of 100 % of the starting value in units of the measurement noise. It keeps
-parameters that the logs cannot show at their starting values and moves well-determined ones by far
-less than their uncertainty.
+*A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter (a standard deviation of
+100 % of the start in units of the measurement noise): what the logs cannot show keeps its start.
 
-*Stage 2, the polish* (:mod:`pendulab.calibration._polish`). The observer's corrections blur what a
-threshold a per cent off does, which in the replay decides whether a push breaks the cart away at
-all. The answer is polished on the replay of the logs through the plant under the true (switching)
-law (:mod:`pendulab.calibration._replay`, compiled, parameter sets in parallel): scans of ``F1``,
-``F2`` and ``v2``, then a pattern search, within a bound on the samples replayed; then robust
-1-D scans on the replay (:func:`pendulab.calibration._polish.scan_directions`) along what slow logs
-confuse, each followed by the pattern search: the common scale of the force gain, the forces and the
-drags (quasi-static motion, ``gain V = (B + Beq) v + F``, is blind to it; only the inertia of the
-breakaways sees it), the split of the drag between ``B`` and ``Beq`` (with the slip region's end speed:
-a slow log's wrong basin folds ``B`` into ``Beq`` and drops the slip region), the corner ``F2, v2``,
-and each parameter over a factor 9. A scan sees another basin along its axis; a local search only the slope.
-The first round of scans runs whatever the cost. After the pattern search, and after each round of scans,
-a walk along the slip region's corner (``v2`` moved, each with its best ``F2``:
-:func:`pendulab.calibration._polish.walk`), a valley a few tenths of a per cent of ``F2`` wide on which a
-pattern search stops anywhere, and the pattern search again. Last, where the chosen answer still misses
-by more than :data:`EVOLVE_ABOVE_STEPS` encoder steps, an evolution strategy (CMA-ES,
-:func:`pendulab.calibration._polish.evolve`) around it in log coordinates, a population of 16 per batched
-replay (derivative-free, it learns the joint moves the fixed directions miss), and the pattern search again. A logged voltage with sample
-noise (a measured one) is replayed denoised where that replays the motion better (split at its steps,
-then L1 trend filtering: steps, ramps and holds are kept): noise on a level just below a threshold
-would otherwise break the cart away in the replay.
+*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which
+decides whether a push breaks the cart away at all: scans of the thresholds and a pattern search,
+robust 1-D scans along what slow logs confuse (the common scale of the gain, the forces and the drags;
+the split of the drag between ``B`` and ``Beq``; the corner ``F2, v2``), walks along that corner, and
+where the answer still misses by more than :data:`EVOLVE_ABOVE_STEPS` encoder steps an evolution
+strategy (CMA-ES). A noisy logged voltage is replayed denoised where that replays the motion better.
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
 (each rest of the cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state
@@ -57,19 +35,11 @@ estimate); the RMS and largest position error are reported and stored in the cal
 ``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than
 :attr:`FitResult.forward_limit`.
 
-*What the logs determine* (:func:`pendulab.calibration._polish.profile`). The replay cost along each
-parameter around the answer: risen by one effective chi-square unit both ways, the parameter is
-*determined* and that half-width (at least the linearized covariance, which keeps ``Beq`` and the
-force gain off together) is its standard uncertainty; one way only, or both ways but wider than a fifth
-of its value, it is *bounded* (e.g. every push exceeds ``F1``: ``F1`` only bounded above); flat, *not
-identified*, and it keeps its start value. ``F2`` or ``v2`` moved alone leaves the valley of the slip
-region's corner: its profile counts the move with the other's best value too. ``v1``, which shows only
-in the creep of a stopping cart, is only ever bounded when other parameters are fitted with it
-(:data:`V1_SCATTER`). The
-profile also runs along the common scale and the drag split: where the cost does not rise both ways
-along one of them, none of its parameters is reported determined (a slow log that never shows the
-inertia cannot tell the force gain from a common scale of everything). The calibration file says
-which (``metadata.determination``); a log that determines nothing is refused.
+*What the logs determine* (:func:`pendulab.calibration._polish.profile`): along each parameter (and
+the common scale and the drag split), a replay cost that rises by one effective chi-square unit both
+ways makes it *determined* (that half-width its standard uncertainty), one way only *bounded*, flat
+*not identified* (it keeps its start value); ``v1`` is at most bounded (:data:`V1_SCATTER`). The
+calibration file says which (``metadata.determination``); a log that determines nothing is refused.
 
 *The start* (:func:`ramp_start`, the one rule for the Python API and ``pendulab fit``): the friction
 from the ramp-test extraction where the logs are ramp tests, else ``params0``.
@@ -166,7 +136,6 @@ class FitResult:
     forward_rms: float = math.nan  # position error of the forward simulation (m), see forward_check
     forward_max: float = math.nan
     encoder_step: float = 0.0
-    travel: float = 0.0  # largest peak-to-peak cart position of the logs (m)
     uncertainty_method: str = ""
     restarts: int = 0  # where the forward simulation continued from a known state (rests; an upright pendulum's estimates)
     voltage_filtered: bool = False  # the replays used the denoised logged voltage (noisy voltage)
@@ -280,23 +249,16 @@ class FitResult:
         return "\n".join(lines)
 
 
-#: A fit is rejected when its forward simulation misses the logs (RMS) by more than this many
-#: encoder steps. The replay restarts at every rest of the cart (where the log gives its state), so
-#: one late breakaway no longer shifts the rest of the log: with the true values a replay misses by
-#: the noise and the quantization (about one step); good fits of logs of several shapes miss by 1 to
-#: 12 steps, while values 16 % off, or wrong units, miss by hundreds.
+#: A fit is rejected when its forward simulation misses the logs (RMS) by more than this many encoder
+#: steps: the true values miss by about one, good fits by 1 to 12, values 16 % off or wrong units by hundreds.
 FORWARD_LIMIT_STEPS = 20.0
-#: Above this forward-simulation RMS (encoder steps) the fit reports no parameter as determined. The
-#: profile only sees the basin the search ended in: on a slow-ramp log of an unseen rig the search
-#: stopped where the drag B had folded into Beq (Beq +780 %, replay 4.5 steps, while the true values
-#: replay within 1), and the profile around that point called Beq determined to a few per cent. A fit
-#: that found the log's own answer replays within about two steps (the corpus: 0.9 to 2.5).
+#: Above this forward-simulation RMS (encoder steps) no parameter is reported determined (:func:`confidence_of`):
+#: on a slow-ramp log the search stopped with B folded into Beq (Beq +780 %, 4.5 steps) and the profile there
+#: called Beq determined to a few per cent; fits that found the log's own answer replay within 0.9 to 2.5.
 CONFIDENT_STEPS = 3.0
 
 #: The bandwidth (rad/s) of the observer that chooses among the observer search's answers from its starts.
 CHOICE_OMEGA = 20.0
-#: The solver status of an answer of the observer search.
-OBSERVER_STATUS = "observer search converged"
 
 def _noise_level(x: np.ndarray) -> float:
     """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
@@ -308,21 +270,16 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
     from scipy.signal import savgol_filter
 
     n = len(log)
-    window = min(31, n - (1 - n % 2))
-    window = window if window % 2 else window - 1
-    dt = log.period
-    if window >= 5:
-        x = savgol_filter(log.x, window, 3)
-        v = savgol_filter(log.x, window, 3, deriv=1, delta=dt)
-    else:
-        x, v = log.x.copy(), np.gradient(log.x, log.t)
-    columns = [x, v]
-    if with_pendulum:
-        alpha = log.alpha if log.alpha is not None else np.zeros(n)
+    window = min(31, n - (1 - n % 2))  # odd
+
+    def smoothed(y: np.ndarray) -> list[np.ndarray]:
         if window >= 5:
-            columns += [savgol_filter(alpha, window, 3), savgol_filter(alpha, window, 3, deriv=1, delta=dt)]
-        else:
-            columns += [alpha, np.gradient(alpha, log.t)]
+            return [savgol_filter(y, window, 3), savgol_filter(y, window, 3, deriv=1, delta=log.period)]
+        return [y, np.gradient(y, log.t)]
+
+    columns = smoothed(log.x)
+    if with_pendulum:
+        columns += smoothed(log.alpha if log.alpha is not None else np.zeros(n))
     return np.column_stack(columns)
 
 
@@ -332,21 +289,16 @@ SCAN_CYCLES = 3
 SCAN_GAIN = 0.02
 SCAN_ABOVE_STEPS = 2.0
 #: The stick speed ``v1`` is reported bounded, never determined, within its profile's range widened by this
-#: factor either way. It shows only in how a stopping cart creeps once slower than ``v1`` (with ``Beq`` alone
-#: as its drag, SPEC §2), and small moves of the other parameters make up for it: over the corpus's fits
-#: where the profile called ``v1`` determined, 7 of 20 were 10 to 21 % off (the unseen rig's calibrate ramp
-#: test: 21 % low, "determined" to 3 %, and the truth's ``v1`` with the others polished replayed as well).
+#: factor either way: it shows only in how a stopping cart creeps, and the others' moves make up for it (7 of
+#: 20 corpus fits where the profile called it determined were 10 to 21 % off).
 V1_SCATTER = 1.3
-#: One walk along the valley of v2 and F2 (:func:`_polish.walk`), polished from where it ends if it lowers the cost by
-#: this share (one finds most of it: on the unseen rig's calibrate ramp test the cost fell 2.5-fold, a second walk took 9 % more).
+#: One walk along the valley of v2 and F2 (:func:`_polish.walk`) is polished from if it lowers the cost by this share.
 WALK_GAIN = 0.01
 #: Above this replay RMS (encoder steps) the chosen answer goes through the evolution strategy (:func:`_evolved`),
 #: with each of these seeds while it still misses: on the sticky rig's chirp, stopped at 2.31 steps, six of seven
 #: seeds found 0.9-1.6 steps (the truth: 0.97), one none lower (15 CPU-s each).
 EVOLVE_ABOVE_STEPS = 1.5
 EVOLVE_SEEDS = (19, 20)
-#: Batched replays of one :func:`_polish.evolve`.
-EVOLVE_REPLAYS = _polish.EVOLVE_GENERATIONS
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
 POLISH_WORK = 1.4e7
 #: The searches see at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
@@ -364,15 +316,13 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
     total = sum(log.duration for log in logs)
     if total <= STAGE_SECONDS * 1.25:
         return [(log, j, 0) for j, log in enumerate(logs)]
-    from pendulab.calibration._polish import rests
-
     candidates = []
     for j, log in enumerate(logs):
         M = interval_samples(log)
         length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
         # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
-        edges = np.array(sorted(k for span in rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
+        edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
         stride = max(M, (length // 8) // M * M)
         for first in range(0, len(log) - length + 1, stride):
             changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
@@ -385,16 +335,6 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
         if len(chosen) * PIECE_SECONDS >= STAGE_SECONDS:
             break
     return [(logs[j].slice(first, first + length), j, first) for j, first, length in sorted(chosen)]
-
-
-def _start_from_logs(logs: Sequence[RampLog], params0: PlantParameters, names: Sequence[str], progress: Callable[[str], None]) -> PlantParameters:
-    """``params0`` with the fitted names' values estimated from the logs (:func:`~pendulab.calibration._start.log_start`)."""
-    from pendulab.calibration import _start
-
-    estimate = params0.with_values(**{n: getattr(_start.log_start(logs, params0), n) for n in names})
-    shown = ", ".join(f"{n}={getattr(estimate, n):.4g}" for n in names if getattr(estimate, n) != getattr(params0, n))
-    progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
-    return estimate
 
 
 #: What to record instead of a log that determines nothing.
@@ -491,8 +431,7 @@ class _Candidate:
     """A search's answer (stage 1): scaled values, the logs as it estimated them, what the polish starts from."""
 
     theta: np.ndarray
-    start: np.ndarray  # where the search started (scaled): a start of the polish too
-    stats: dict[str, Any]  # the solver's return_status, iter_count, success
+    iterations: int  # of the observer search
     rms: float  # the search's one-sample prediction RMS (m)
     whole: list[_LogEstimate]
     replays: list[_polish.Anchors]  # the whole logs' restarts for the replay
@@ -537,8 +476,12 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
     starts = [theta0]
     if np.max(np.abs(setup.theta_default / theta0 - 1)) > 0.05:
         starts.append(setup.theta_default)
-    if start_from_logs and not with_pendulum:
-        estimate = _start_from_logs(setup.logs, setup.params0, names, setup.progress)
+    if start_from_logs and not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
+        from pendulab.calibration._start import log_start
+
+        estimate = setup.params0.with_values(**{n: getattr(log_start(setup.logs, setup.params0), n) for n in names})
+        shown = ", ".join(f"{n}={getattr(estimate, n):.4g}" for n in names if getattr(estimate, n) != getattr(setup.params0, n))
+        setup.progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
         starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / setup.scales))
     found = _observer.search(searched, space, starts)
     n_errors = sum(a.measured.size for a in searched)
@@ -554,14 +497,12 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
         predicted, states = _replay.observe(vector, a.V, a.t, a.measured, a.x0, gain, free=names, states=True)
         e.fitted[:] = np.r_[a.x0[0], predicted[0, :, 0]]
         if with_pendulum:
-            # The observer's own state estimates (the model at the answer, held to the logged angle) are where an
-            # upright pendulum's replay restarts: much nearer than the smoothed log's speeds.
+            # An upright pendulum's replay restarts from the observer's own state estimates (see the module docstring).
             every = np.vstack([np.r_[a.x0], states[0]])[:: e.stride]
             e.estimates[:, : every.shape[0]] = every.T
             restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
             replays[j] = _polish.settled(restarted, vector[0], names)
-    stats = {"return_status": OBSERVER_STATUS, "iter_count": found.iterations, "success": True}
-    return _Candidate(found.theta, theta0, stats, rms_observed, whole, replays, others=found.others)
+    return _Candidate(found.theta, found.iterations, rms_observed, whole, replays, others=found.others)
 
 
 def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
@@ -570,17 +511,12 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     replays = candidate.replays
     # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
     searched = _pieces_of(setup, replays, candidate.whole)
-    # The polish starts from the search's answer or another start's, or from where the search started. The
-    # observer barely sees the common scale of a slow log (a weak model's predictions are as good: the observer
-    # corrects them), so an observer of narrow bandwidth chooses: it sees the common scale as the replay does,
-    # without the replay's needle (on a sweep of the unseen rig the replay chose an answer that polished to 2.9
-    # encoder steps; the observer at 20 rad/s chooses the search's own answer).
-    starts = np.array([candidate.theta, *candidate.others, space.project(candidate.start.copy())])
+    # The polish starts from the search's answer, another start's or the start, as an observer of narrow
+    # bandwidth (CHOICE_OMEGA) chooses: it sees a slow log's common scale as the replay does, without its needle.
+    starts = np.array([candidate.theta, *candidate.others, space.project(setup.theta0.copy())])
     which = 0
     if setup.denoise:
-        # Noise the motor never saw flips the stick-slip law's decisions near a threshold (a level 1 % below
-        # the breakaway force breaks away in the replay): the denoised twin is tried too, and the better of
-        # the two (at the better start) is searched.
+        # The denoised twin is tried too (see _Setup.denoise), and the better of the two is searched.
         voltages = [searched, [_polish.denoised(a) for a in searched]]
         which = int(np.argmin([float(np.min(_polish.costs(v, space, starts))) for v in voltages]))
         searched = voltages[which]
@@ -591,9 +527,7 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     result = _polish.polish(searched, space, first, max_iter=polish_iter, work=work)
     target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
     def walked(result: _polish.Polished) -> _polish.Polished:
-        """Along the slip region's corner (v2 with its best F2), and the polish from where it ends: a valley
-        the pattern search stops anywhere on (on the unseen rig's calibrate ramp test it stopped at 1.6
-        encoder steps with v2 5.7 % off; along the valley lies the truth's 1.0)."""
+        """:func:`_polish.walk` along the slip region's corner, and the polish from where it ends."""
         theta, cost = _polish.walk(searched, space, result.theta, result.cost)
         if cost >= (1 - WALK_GAIN) * result.cost:
             return result
@@ -605,11 +539,8 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     for cycle in range(SCAN_CYCLES):
         if cycle and result.cost <= target:
             break
-        # Scans along what slow logs confuse (the common scale of the gain, forces and drags; B folded into
-        # Beq with the slip region gone; each parameter over a factor 9), which see other basins a local
-        # search cannot, then the polish and the walk: once whatever the cost (the unseen rig's slow ramps
-        # polished to 1.17 encoder steps with Beq 17 % high; the scans found 0.88, below the truth's 0.92),
-        # again while it misses by more than a couple of encoder steps.
+        # Scans along what slow logs confuse (_polish.scan_directions), the polish and the walk: once whatever
+        # the cost (the unseen rig's slow ramps: 1.17 encoder steps -> 0.88), again while it misses (SCAN_CYCLES).
         scanned = _polish.scan_directions(searched, space, result.theta)
         if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
             break
@@ -617,9 +548,7 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
         setup.progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
     if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
         whole = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
-        # Every later decision compares costs on what was searched (one measure): the answer's cost there. (It was
-        # the whole logs' cost, which the evolution strategy then beat on the pieces by construction: on a 60 s log
-        # it ran 25 CPU-s and "lowered" 7.5e5 to 1.6e5 at the same replay RMS.)
+        # Later decisions compare costs on what was searched: the answer carries its cost there (tests/test_fit_pieces.py).
         on_pieces = float(_polish.costs(searched, space, whole.theta[None])[0])
         result = result.then(_polish.Polished(whole.theta, on_pieces, on_pieces, whole.iterations, whole.replays), replays=1)
     rms = _replay_rms(setup, replays, result.theta)
@@ -653,7 +582,7 @@ def _evolved(setup: _Setup, answer: _Answer) -> _Answer:
             break
         theta, cost = _polish.evolve(searched, space, result.theta, result.cost, seed)
         if cost < (1 - WALK_GAIN) * result.cost:
-            result = result.then(_polish.polish(searched, space, theta, max_iter=setup.polish_iter, scan=()), replays=EVOLVE_REPLAYS)
+            result = result.then(_polish.polish(searched, space, theta, max_iter=setup.polish_iter, scan=()), replays=_polish.EVOLVE_GENERATIONS)
     if result is answer.polished:
         return answer
     rms = _replay_rms(setup, answer.replays, result.theta)
@@ -666,8 +595,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     names, scales, space, params0 = setup.names, setup.scales, setup.space, setup.params0
     candidate, searched, replays = answer.candidate, answer.searched, answer.replays
     theta_opt = answer.polished.theta
-    values = setup.values(theta_opt)
-    params = params0.with_values(**values)
 
     # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
     # they do not identify keeps its start value (if the replay stays as good with it).
@@ -680,8 +607,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         r_trial = space.residuals(searched, trial[None])[0]
         if float(r_trial @ r_trial) <= answer.polished.cost + prof.threshold:
             theta_opt = trial
-            values = setup.values(theta_opt)
-            params = params0.with_values(**values)
+    values = setup.values(theta_opt)
+    params = params0.with_values(**values)
     if _polish.DETERMINED not in prof.status:
         raise FitRejected(
             "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
@@ -732,7 +659,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     confidence = "; ".join(note for note in (confidence, regime_note) if note)
     if confidence:
         setup.progress(confidence)
-    stats = candidate.stats
     return FitResult(
         names=names,
         values=values,
@@ -747,15 +673,14 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         residual_rms=candidate.rms,
         params=params,
         n_samples=sum(len(log) for log in setup.logs),
-        iterations=int(stats.get("iter_count", -1)),
-        success=bool(stats.get("success", False)),
-        status=str(stats.get("return_status", "unknown")),
+        iterations=candidate.iterations,
+        success=True,
+        status="observer search converged",
         seconds=time.perf_counter() - t_start,
         curves=tuple(curves),
         forward_rms=forward_rms,
         forward_max=forward_max,
         encoder_step=setup.step,
-        travel=max(float(np.ptp(e.log.x[: e.used])) for e in candidate.whole),
     )
 
 
@@ -787,9 +712,8 @@ def fit_parameters(
     fit : sequence of str
         Names to fit, among ``F1 v1 F2 v2 B Beq force_gain M_cart``.
     fit_mass : bool
-        Also fit ``M_cart``. Scaling the mass, ``Beq``, ``B``, the friction forces and the force gain
-        together leaves the motion unchanged except through the fixed rotor inertia, so expect large
-        uncertainties on all of them when the mass is fitted too.
+        Also fit ``M_cart`` (expect large uncertainties: only the fixed rotor inertia tells a common scale
+        of the mass, the drags, the forces and the force gain).
     interval : float
         Spacing (s) of the state estimates: where the pieces of long logs start and an upright
         pendulum's replay restarts (every :data:`pendulab.calibration._polish.UNSTABLE_WINDOW`).
@@ -802,15 +726,13 @@ def fit_parameters(
         Largest number of pattern-search steps of the polish on the true law's replay.
     start : {"auto", "given"}
         ``"auto"``: the friction starts from the ramp-test extraction where the logs are ramp tests
-        (:func:`ramp_start`; the one place that decides the start, for the Python API and
-        ``pendulab fit`` alike); ``"given"``: from ``params0``.
+        (:func:`ramp_start`); ``"given"``: from ``params0``.
     polish_work : float
         Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
         same answer on a busy machine.
     start_from_logs : bool
-        Also start the observer search from an estimate made from the logs themselves
-        (:mod:`pendulab.calibration._start`: the drive and the drag from fast motion, the breakaway
-        force from the rests). Not for logs with the pendulum.
+        Also start the observer search from the logs' own estimate (:mod:`pendulab.calibration._start`;
+        not for logs with the pendulum).
     on_progress : callable, optional
         Called with a line of text at each stage.
 
@@ -851,11 +773,9 @@ def fit_parameters(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
         theta_default=np.array([getattr(defaults, n) for n in names]) / scales,
         space=_polish.Space(params0, names, scales, lower, upper, prior), interval=interval,
-        pieces=[], voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
+        pieces=_pieces(logs, lambda log: _stride(log, interval)), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
         polish_iter=polish_iter, polish_work=polish_work,
     )
-    # The searches see at most STAGE_SECONDS of the logs, in pieces spread over them; the check sees everything.
-    setup.pieces = _pieces(logs, setup.stride)
     if compile is not False:
         _replay.prepare(params0, [log.period for log in logs], names)  # the replay and the observer, compiled once per machine
     if compile is False or not all(_replay.observer_compiled(params0, log.period, names) for log in logs):
@@ -900,8 +820,6 @@ def confidence_of(
     >>> note.startswith("the answer misses the logs by 4.4 encoder steps")
     True
     """
-    from pendulab.calibration import _polish
-
     steps = forward_rms / max(step, 1e-6)
     if steps <= CONFIDENT_STEPS:
         return tuple(status), np.asarray(sigma, dtype=float), ""
@@ -949,23 +867,17 @@ def split_of_the_drag(
 ) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What a log that never leaves the slip region cannot determine, whatever the profile around the answer says.
 
-    Inside the slip region the drag is ``B + Beq`` (with the motor's own back-EMF drag): a log whose replay
-    spends fewer than :data:`MIN_BEYOND_SHARE` of its moving samples beyond it shows only that sum. Both are
-    then reported bounded, between 0 and the sum (in the returned ``allowed``). The rule needs both ``B`` and
-    ``Beq`` fitted: with either one known, the drag the log shows fixes the other, and the common scale with it. Such a log also sees the common
-    scale of the drive, the forces and that drag only through the cart's inertia over the slip region's short
-    time constant ``Mc/(B + Beq + ...)`` (about 10 ms), and the stick speed ``v1`` only through how long the
-    cart takes to slow down to it, which that time constant sets too; the slip region's ends ``v2`` and ``F2``
-    only from below (the cart never passed them). All of them are reported bounded. (On bench/fit.py's 25 s slow-ramp log of such a rig the search ended at
-    Beq -62 %, B -13 %, F1 and the force gain -18 %, v1 -76 %, and the profile called them all determined; the
-    breakaway voltage ``F1/(gain K)`` was right.) A note says why and what to record; else unchanged.
+    Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE`
+    of its moving samples beyond it (with both ``B`` and ``Beq`` fitted) shows only that sum, so both are reported
+    bounded between 0 and the sum (in the returned ``allowed``); it sees the common scale of the drive, the forces
+    and that drag, and ``v1``, only through the cart's inertia over the slip region's ~10 ms time constant, and
+    ``v2`` and ``F2`` only from below: every name of :data:`SLIP_ONLY_UNDETERMINED` is reported bounded, and a
+    note says why and what to record. Else unchanged.
 
     Returns
     -------
     status, sigma, allowed, note
     """
-    from pendulab.calibration import _polish
-
     inside, beyond = (sum(r[k] for r in regimes) for k in (0, 1))
     moving = inside + beyond
     if moving == 0 or "B" not in names or "Beq" not in names or beyond >= max(MIN_BEYOND_SHARE * moving, MIN_BEYOND_SAMPLES):
@@ -989,11 +901,8 @@ def split_of_the_drag(
 def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[PlantParameters, str]:
     """Starting values from the ramp-test extraction, where the logs are ramp tests.
 
-    The least-squares problem of stick-slip friction has local minima: a start far from the truth
-    (twice the breakaway force, half the drag) can end in one. The rule-based extraction of
-    :func:`~pendulab.calibration.extract.extract_friction` is robust and lands within a few per cent,
-    so it makes a good start. Logs that are not ramp tests (closed-loop runs), or a pendulum
-    configuration, keep ``params0``.
+    The rule-based :func:`~pendulab.calibration.extract.extract_friction` lands within a few per cent, out
+    of the local minima a far start can end in. Logs that are not ramp tests, or a pendulum, keep ``params0``.
 
     Returns
     -------

@@ -37,7 +37,6 @@ from pendulab.errors import CalibrationError
 TIME_NAMES = ("t", "time")
 VOLTAGE_NAMES = ("V", "voltage", "V_applied", "u")
 POSITION_NAMES = ("x", "x_measured")
-ANGLE_NAMES = ("alpha", "alpha_measured")
 ANGLE_PREFERRED = ("alpha_measured", "alpha")  # a simulate log has both: the encoder reading is what a rig gives
 
 
@@ -198,10 +197,7 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
         return RampLog(t=columns["t"], V=columns["voltage"], x=columns["x"], alpha=columns["alpha"], source=str(path))
     if not path.is_file():
         raise CalibrationError(f"log {path} does not exist")
-    if path.suffix.lower() == ".mat":
-        columns = _read_mat(path)
-    else:
-        columns = _read_csv(path)
+    columns = _read_mat(path) if path.suffix.lower() == ".mat" else _read_csv(path)
     available = list(columns)
     t_name = _pick(TIME_NAMES, available)
     v_name = _pick(VOLTAGE_NAMES if "voltage" not in available else ("voltage",), available)
@@ -235,9 +231,7 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     delimiter = next((d for d in (",", ";", "\t") if d in header_line), None)
 
     def split(line: str) -> list[str]:
-        if delimiter is None:
-            return line.split()
-        return next(csv.reader([line], delimiter=delimiter))
+        return line.split() if delimiter is None else next(csv.reader([line], delimiter=delimiter))
 
     if len(lines) > 1 and not text.endswith(("\n", "\r")):
         # Every writer ends its rows with a line end; a last row without one was cut off mid-write
@@ -249,7 +243,7 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     header = [h.strip() for h in split(header_line)]
     if any(_is_number(h) for h in header):
         raise CalibrationError(f"log {path} has no header line; the first line must name the columns, e.g. 't,V,x'")
-    used = {*TIME_NAMES, *VOLTAGE_NAMES, *POSITION_NAMES, *ANGLE_NAMES}
+    used = {*TIME_NAMES, *VOLTAGE_NAMES, *POSITION_NAMES, *ANGLE_PREFERRED}
     values: dict[str, list[float]] = {name: [] for name in header if name}
     for line_no, line in lines[1:]:
         row = split(line)
@@ -325,10 +319,8 @@ def _is_hdf5(path: Path) -> bool:
 
 
 def _read_mat_hdf5(path: Path, what: str) -> dict[str, np.ndarray]:
-    try:
-        import h5py
-    except ImportError:  # pragma: no cover - h5py is a dependency
-        raise CalibrationError(f"{what} is a MATLAB v7.3 (HDF5) file; install h5py or save it with save(..., '-v7')") from None
+    import h5py
+
     variables: dict[str, np.ndarray] = {}
     try:
         with h5py.File(path, "r") as handle:
@@ -379,13 +371,10 @@ def _two_column(path: Path) -> np.ndarray:
         raise CalibrationError(
             f"old-lab log file {path} must hold one two-column [t, value] array (found: {found})"
         )
-    data = arrays[0]
-    data = data if data.shape[1] == 2 else data.T
+    data = arrays[0] if arrays[0].shape[1] == 2 else arrays[0].T
     data = data[np.all(np.isfinite(data), axis=1)]
-    order = np.argsort(data[:, 0], kind="stable")
-    data = data[order]
-    keep = np.concatenate(([True], np.diff(data[:, 0]) > 0))  # repeated time stamps: keep the first
-    data = data[keep]
+    data = data[np.argsort(data[:, 0], kind="stable")]
+    data = data[np.concatenate(([True], np.diff(data[:, 0]) > 0))]  # repeated time stamps: keep the first
     if len(data) < 2:
         raise CalibrationError(f"old-lab log file {path} holds fewer than 2 finite samples")
     return data
@@ -505,6 +494,3 @@ def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda handle: handle.write(buffer.getvalue().encode("utf-8")))
     return path
-
-
-Log = RampLog

@@ -94,11 +94,6 @@ class _Run:
         self.position = self.rig.step(voltage)
         return self.position
 
-    def beyond_limit(self, voltage: float) -> bool:
-        """The cart is past a track limit and ``voltage`` would push it further."""
-        x = self.position
-        return abs(x) >= self.s.track_limit and np.sign(voltage) == np.sign(x)
-
     def steps(self, seconds: float) -> int:
         return max(1, int(round(seconds / self.rig.period)))
 
@@ -152,7 +147,7 @@ class _Run:
         held = 0
         for _ in range(self.steps(s.phase_timeout)):
             voltage = direction * min(abs(voltage) + rate * dt, target)
-            if self.beyond_limit(voltage):
+            if abs(self.position) >= s.track_limit and np.sign(voltage) == np.sign(self.position):  # pushing past a limit
                 self.note(f"track limit at x={self.position * 1e3:.1f} mm: voltage off")
                 break
             x = self.apply(voltage)
@@ -209,9 +204,7 @@ def run_ramp_test(
     settings = replace(settings or RampSettings(), **overrides)
     progress = on_progress or (lambda text: None)
     run = _Run(rig, settings, progress)
-    interrupted = False
-    reason = ""
-    done, done_at = 0, 0.0
+    interrupted, reason, done, done_at = False, "", 0, 0.0
     try:
         for i in range(1, iterations + 1):
             run.note(f"iteration {i}")

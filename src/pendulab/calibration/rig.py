@@ -22,8 +22,6 @@ import abc
 import warnings
 from typing import Callable, Sequence
 
-import numpy as np
-
 from pendulab.errors import CalibrationError, FmuBuildError
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
@@ -142,11 +140,6 @@ class VirtualRig(Rig):
     def time(self) -> float:
         return self._k * self.period
 
-    @property
-    def state(self) -> np.ndarray:
-        """True ``[x, xdot]`` (for tests; a real rig cannot report it)."""
-        return self._stepper.state()
-
     def reset(self) -> float:
         self._k = 0
         return self._stepper.reset(self.x0)
@@ -173,7 +166,6 @@ class _FmuStepper:
         self._period = period
         self._in = self._fmu.port(["V"])
         self._out = self._fmu.port(["x_measured"])
-        self._state = self._fmu.port(["x", "xdot"])
         self._live = False
 
     def reset(self, x0: float) -> float:
@@ -192,10 +184,6 @@ class _FmuStepper:
         self._fmu.step(t, self._period)  # SimulationError if the FMU refuses (it checks for non-finite states)
         self._fmu.read(self._out)
         return self._out.values["Real"][0]
-
-    def state(self) -> np.ndarray:
-        self._fmu.read(self._state)
-        return np.asarray(self._state.values["Real"][:2])
 
     def close(self) -> None:
         self._fmu.close()
@@ -233,9 +221,6 @@ class _CasadiStepper:
     def step(self, voltage: float, t: float) -> float:
         self._state, measured = self._f(self._state, voltage, self._p, t)
         return float(measured)
-
-    def state(self) -> np.ndarray:
-        return np.asarray(self._state).ravel()[:2]
 
     def close(self) -> None:
         pass

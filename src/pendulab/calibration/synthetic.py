@@ -137,9 +137,8 @@ def closed_loop_log(rig: PlantParameters = TRUE, duration: float = 8.0, *, noise
 
     params = closed_loop_params(rig)
     c = simulate(RunSpec.for_parameters(demo_controller("long"), params, timing=Timing(stop_time=duration))).columns
-    log = _measured(c["t"], c["voltage"], c["x"], params.q_x, noise, voltage_noise, seed, "synthetic closed loop, long pendulum",
-                    alpha=c["alpha_measured"])
-    return log
+    return _measured(c["t"], c["voltage"], c["x"], params.q_x, noise, voltage_noise, seed, "synthetic closed loop, long pendulum",
+                     alpha=c["alpha_measured"])
 
 
 def calibrate_ramp_log(rig: PlantParameters = TRUE, *, iterations: int = 1, noise: float = 1e-5, voltage_noise: float = 0.0,
