@@ -37,7 +37,7 @@ estimate); the RMS and largest position error are reported and stored in the cal
 
 *What the logs determine* (:func:`pendulab.calibration._polish.profile`): along each parameter (and
 the common scale and the drag split), a replay cost that rises by one effective chi-square unit both
-ways makes it *determined* (that half-width its standard uncertainty), one way only *bounded*, flat
+ways makes it *determined* (that half-width its standard uncertainty, at least 0.3 %), one way only *bounded*, flat
 *not identified* (it keeps its start value); ``v1`` is at most bounded (:data:`V1_SCATTER`). The
 calibration file says which (``metadata.determination``); a log that determines nothing is refused.
 
