@@ -177,7 +177,8 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
     assert status == found and np.array_equal(out, sigma) and note == ""  # replays well: the profile stands
     status, out, note = confidence_of(found, sigma, 1.5 * CONFIDENT_STEPS * q, q)
     assert status == ("bounded", "bounded", "bounded", "not identified") and np.all(np.isinf(out))
-    assert f"misses the logs by {1.5 * CONFIDENT_STEPS:.1f} encoder steps" in note and "--start" in note
+    assert f"misses the logs by {1.5 * CONFIDENT_STEPS:.1f} encoder steps" in note
+    assert "--calibration FILE --start defaults" in note  # a start the search has not tried: the only advice that helps
     # The calibration file and the summary carry the reason.
     params = PlantParameters.preset("none")
     result = FitResult(
@@ -190,3 +191,30 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
     meta = result.to_calibration().metadata
     assert meta["determination_note"] == note and meta["uncertainty"] == {"Beq": None, "force_gain": None}
     assert result.summary().splitlines()[-1] == note
+
+
+def test_the_wrong_basin_advice_starts_the_fit_from_the_calibration_file(ramp_test_fit, tmp_path, capsys):
+    """The note of a fit that missed says: fit again with ``--calibration FILE --start defaults``. That command
+    starts every fitted parameter from the file (not from the ramp extraction or the lab's defaults)."""
+    log, path, result = ramp_test_fit
+    calibration = tmp_path / "earlier.json"
+    from pendulab.calibration.files import save_calibration
+
+    earlier = result.to_calibration(rig="earlier")
+    save_calibration(earlier, calibration)
+    calls = []
+
+    def recorded(logs, params0=None, *args, **kwargs):
+        calls.append((params0, kwargs))
+        return result
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(fit_module, "fit_parameters", recorded)
+        status, _, err = run(capsys, "fit", str(path), "--calibration", str(calibration), "--start", "defaults")
+    assert status == 0, err
+    params0, kwargs = calls[0]
+    assert kwargs["start"] == "given"
+    start = earlier.apply(PlantParameters.preset("none"))
+    for name in DEFAULT_FIT:
+        assert getattr(params0, name) == pytest.approx(getattr(start, name), rel=1e-12)
+    assert abs(params0.F1 / PlantParameters.preset("none").F1 - 1) > 0.05  # not the lab's default

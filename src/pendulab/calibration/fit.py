@@ -828,7 +828,8 @@ def confidence_of(
     note = (
         f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
         f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
-        f"an uncertainty; fit again with another --start, or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
+        f"an uncertainty; fit again from an earlier calibration of this rig (--calibration FILE --start defaults: the search "
+        f"already tried the lab's defaults and the logs' own estimate), or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
     )
     return demoted, sigma, note
 
