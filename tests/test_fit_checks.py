@@ -14,7 +14,7 @@ import scipy.io
 
 from pendulab.calibration import fit as fit_module
 from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, an independent replay of the log
-from pendulab.calibration.files import load_calibration
+from pendulab.calibration.files import load_calibration, save_calibration
 from pendulab.calibration.fit import DEFAULT_FIT, fit_parameters, ramp_start
 from pendulab.calibration.logs import RampLog, read_log, write_log
 from pendulab.calibration.synthetic import TEST_RIG
@@ -29,6 +29,21 @@ def run(capsys, *argv: str) -> tuple[int, str, str]:
     status = main(list(argv))
     captured = capsys.readouterr()
     return status, captured.out, captured.err
+
+
+@contextlib.contextmanager
+def recorded_fit(result):
+    """``pendulab fit``'s call of ``fit_parameters`` recorded (``(logs, params0, kwargs)`` per call) and
+    answered with ``result``: the command line is checked without a minute of fitting."""
+    calls = []
+
+    def recorded(logs, params0=None, **kwargs):
+        calls.append((list(logs), params0, kwargs))
+        return result
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(fit_module, "fit_parameters", recorded)
+        yield calls
 
 
 @pytest.fixture(scope="module")
@@ -54,14 +69,7 @@ def folder_fit(ramp_test_fit, tmp_path_factory):
     scipy.io.savemat(folder / "voltage.mat", {"Vm": np.column_stack([log.t, log.V])})
     scipy.io.savemat(folder / "angle.mat", {"theta": np.column_stack([log.t, np.full(log.t.size, math.pi)])})
     out, text, err = folder.parent / "fit.json", io.StringIO(), io.StringIO()
-    calls = []
-
-    def recorded(logs, params0=None, **kwargs):
-        calls.append((list(logs), params0, kwargs))
-        return result
-
-    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(text), contextlib.redirect_stderr(err):
-        patch.setattr(fit_module, "fit_parameters", recorded)
+    with recorded_fit(result) as calls, contextlib.redirect_stdout(text), contextlib.redirect_stderr(err):
         status = main(["fit", str(folder), "--out", str(out)])
     assert status == 0, err.getvalue()
     assert len(calls) == 1
@@ -196,23 +204,14 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
 def test_the_wrong_basin_advice_starts_the_fit_from_the_calibration_file(ramp_test_fit, tmp_path, capsys):
     """The note of a fit that missed says: fit again with ``--calibration FILE --start defaults``. That command
     starts every fitted parameter from the file (not from the ramp extraction or the lab's defaults)."""
-    log, path, result = ramp_test_fit
+    _, path, result = ramp_test_fit
     calibration = tmp_path / "earlier.json"
-    from pendulab.calibration.files import save_calibration
-
     earlier = result.to_calibration(rig="earlier")
     save_calibration(earlier, calibration)
-    calls = []
-
-    def recorded(logs, params0=None, *args, **kwargs):
-        calls.append((params0, kwargs))
-        return result
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(fit_module, "fit_parameters", recorded)
+    with recorded_fit(result) as calls:
         status, _, err = run(capsys, "fit", str(path), "--calibration", str(calibration), "--start", "defaults")
     assert status == 0, err
-    params0, kwargs = calls[0]
+    _, params0, kwargs = calls[0]
     assert kwargs["start"] == "given"
     start = earlier.apply(PlantParameters.preset("none"))
     for name in DEFAULT_FIT:

@@ -63,6 +63,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Iterable, NamedTuple, Sequence
 
@@ -756,7 +757,8 @@ def fit_parameters(
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
     with_pendulum = params0.Mp > 0
-    _check_logs(logs, with_pendulum, lambda log: _stride(log, interval))
+    stride = partial(_stride, interval=interval)  # samples between the state estimates of a log
+    _check_logs(logs, with_pendulum, stride)
     if start not in ("auto", "given"):
         raise CalibrationError(f"start={start!r}: choose 'auto' (from the logs where they are ramp tests) or 'given'")
     if start == "auto":
@@ -773,7 +775,7 @@ def fit_parameters(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
         theta_default=np.array([getattr(defaults, n) for n in names]) / scales,
         space=_polish.Space(params0, names, scales, lower, upper, prior), interval=interval,
-        pieces=_pieces(logs, lambda log: _stride(log, interval)), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
+        pieces=_pieces(logs, stride), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
         polish_iter=polish_iter, polish_work=polish_work,
     )
     if compile is not False:
