@@ -1,15 +1,19 @@
 """The fit's replay gives the same bits on any thread count (issue 19: the same answer on any x86-64 machine).
 
-Each parameter set is replayed by one thread from start to end, in IEEE arithmetic as written (no
-reassociation, no fused multiply-add: :data:`pendulab.calibration._replay.EXACT_MATH`), so neither the
-OpenMP schedule nor the CPU's vector width can change a result.
+Each parameter set is replayed by one vector lane of one thread from start to end, in IEEE arithmetic as
+written (no reassociation, no fused multiply-add: :data:`pendulab.calibration._replay.EXACT_MATH`), so
+neither the OpenMP schedule nor the CPU's vector width can change a result: the replay gives the bits of
+CasADi's virtual machine.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import subprocess
 import sys
+
+import pytest
 
 from pendulab.calibration._replay import EXACT_MATH  # private: the replay's compiler flags are what this checks
 
@@ -38,22 +42,21 @@ def test_a_batched_replay_is_bitwise_the_same_on_one_and_two_threads():
     assert len(one) == 64 and one == two
 
 
-def test_the_replay_of_many_sets_in_chunks_equals_the_plant_simulated_set_by_set():
-    """The compiled replay (parameter sets batched, padded or split to the compiled widths, the log in chunks of
-    500 samples, arrays passed in place) against :func:`pendulab.calibration._simulation.simulate`, the same RK4 step
-    unrolled in CasADi's virtual machine one set at a time: the same states, sample by sample, for every set."""
+def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set():
+    """The compiled replay (parameter sets in vector lanes, a short last group, arrays passed in place) against
+    :func:`pendulab.calibration._simulation.simulate`, the plant's RK4 step unrolled in CasADi's virtual machine
+    one set at a time with every parameter an input: the same states, sample by sample, for every set."""
     import numpy as np
 
-    from pendulab.calibration._replay import CHUNK, replay  # private: the fit's replay is what this checks
+    from pendulab.calibration._replay import replay  # private: the fit's replay is what this checks
     from pendulab.calibration._simulation import simulate
     from pendulab.calibration.synthetic import RIGS, synthetic_log
 
     log = synthetic_log("chirp", RIGS["unseen"], duration=2.2, voltage_noise=0.0)
-    assert len(log) > 4 * CHUNK  # several chunks, the last one partial
     rng = np.random.default_rng(7)
     base = np.asarray(RIGS["unseen"].as_vector(), dtype=float)
     free = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
-    for m in (3, 40):  # padded to 16, split into 32 + 8
+    for m in (3, 41):  # fewer sets than lanes; several groups and a short last one
         sets = np.tile(base, (m, 1))
         columns = [type(RIGS["unseen"]).names().index(n) for n in free]
         sets[:, columns] *= np.exp(rng.normal(0.0, 0.2, (m, len(free))))
@@ -63,3 +66,45 @@ def test_the_replay_of_many_sets_in_chunks_equals_the_plant_simulated_set_by_set
             reference = simulate(sets[j], log.V, float(log.t[1] - log.t[0]))[1:]
             assert np.max(np.abs(states[j] - reference)) < 1e-9, (m, j)
         assert np.ptp(states[:, -1, 0]) > 1e-3  # the sets differ
+
+
+@pytest.mark.parametrize("observer", [0, 2])
+def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer):
+    """The replay (with restarts) and the observer of the position and the angle, built for 1, 2, 4 and 8 lanes,
+    against the same step evaluated in CasADi's virtual machine: equal bit for bit, for the pendulum's
+    sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them)."""
+    import casadi as ca
+    import numpy as np
+
+    from pendulab.calibration import _replay  # private: the compiled replay's lanes are what this checks
+    from pendulab.calibration._observer import observer_gain
+    from pendulab.calibration.synthetic import RIGS, synthetic_log
+    from pendulab.model.parameters import PlantParameters
+
+    log = synthetic_log("chirp", RIGS["unseen"], duration=0.6, voltage_noise=0.0)
+    n, free = len(log), ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
+    base = np.asarray(PlantParameters.preset("long").as_vector(), dtype=float)
+    sets = base * np.exp(np.random.default_rng(3).normal(0.0, 0.2, (5, base.size)))
+    key, P, h = _replay._key(sets, log.t, free)
+    x0 = np.array([0.0, 0.0, 0.05, 0.0])
+    if observer:
+        y = np.column_stack([log.x, 0.02 * np.sin(3 * log.t)])
+        gain = observer_gain(60.0, log.period, outputs=2).T.ravel().copy()
+        inputs = (x0, log.V, log.t, y, gain, P)
+        per_sample = [log.V[None], log.t[None], y.T, ca.repmat(ca.DM(gain).reshape((4, 2)), 1, n)]
+        outputs = [np.empty((5, n, 4)), np.empty((5, n, 2))]  # corrected states, predicted outputs
+    else:
+        r, sr = np.zeros(n), np.zeros((n, 4))
+        r[200], sr[200] = 1.0, (0.01, 0.02, -0.03, 0.1)
+        inputs = (x0, log.V, log.t, r, sr, P)
+        per_sample = [log.V[None], log.t[None], r[None], sr.T]
+        outputs = [np.empty((5, n, 4))]
+    vm = _replay._in_vm(_replay._step(*key, observer), x0, per_sample, P, h)
+    source = _replay._source(*key, observer)
+    for lanes in (1, 2, 4, 8):
+        run = _replay._load(source, f"pendulab_lanes_test_{observer}", ("-O2", f"-DLANES={lanes}"))
+        assert run is not None, "no C compiler"
+        arrays = [np.ascontiguousarray(a, dtype=float) for a in inputs]
+        run(ctypes.c_int(5), ctypes.c_int(n), *map(_replay._pointer, arrays), ctypes.c_double(h), *map(_replay._pointer, outputs[::-1]))
+        for got, want in zip(outputs, vm):
+            assert np.all(np.isfinite(got)) and np.array_equal(got, want), lanes

@@ -6,15 +6,15 @@ the plant's own RK4 sub-step (:data:`pendulab.model.plant.MAX_SUBSTEP`), for one
 parameter sets at once.
 
 A replay may *restart* from a known state at chosen samples (:class:`pendulab.calibration._polish.Anchors`).
-The step is unrolled over a fixed chunk of samples (:func:`_chunk_function`), mapped over parameter sets
-and compiled to C once per machine (cached by :mod:`pendulab.native`).
+One sample's step is a CasADi SX function (:func:`_step`), compiled once per machine to C that runs
+several parameter sets in the lanes of the CPU's vectors (:mod:`pendulab.simd`), the groups of sets on
+the machine's cores (OpenMP); without a compiler CasADi's virtual machine evaluates it, set by set.
 """
 
 from __future__ import annotations
 
-import contextlib
+import ctypes
 import hashlib
-import io
 import os
 from functools import lru_cache
 from typing import Sequence
@@ -22,6 +22,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from pendulab import simd
 from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
 from pendulab.native import shared_library
@@ -30,37 +31,75 @@ from pendulab.native import shared_library
 # on a busy machine a spinning thread takes the core another process needs.
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
-#: IEEE arithmetic as written, whatever the compiler or CPU: no reassociation (which would let the
-#: vectorizer reorder sums by the CPU's vector width) and no fused multiply-add. The same log then
-#: replays to the same bits on any x86-64 machine and thread count (each parameter set is one thread's).
+#: IEEE arithmetic as written, whatever the compiler or CPU: no reassociation and no fused multiply-add.
+#: Each parameter set is one vector lane's from start to end, so the same log replays to the same bits on any
+#: x86-64 machine, vector width and thread count: those of CasADi's virtual machine.
 EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
-#: Samples per compiled call.
-CHUNK = 500
-#: Numbers of parameter sets compiled for (each a library built once per machine); others are padded.
-SET_COUNTS = (1, 16, 32)
 
-
-def _compile(functions: Sequence[ca.Function], name: str, optimize: str = "-O1", flags: Sequence[str] = ()) -> tuple[str | None, bool]:
-    """Shared library holding ``functions`` (built once, cached by :func:`pendulab.native.shared_library`)
-    and whether it was built just now; ``(None, False)`` without a working compiler."""
-    gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    for f in functions:
-        gen.add(f)
-    library = shared_library(gen.dump(), name, flags=(optimize, *flags), salt=ca.__version__, kind="fit", prebuilt=False)
-    return (str(library.path), library.built) if library else (None, False)
+#: Around one sample's step (``STEP``): each thread takes LANES parameter sets at a time through the whole log
+#: (a short last group repeats the last set). The replay's step restarts from ``sr`` where ``r`` is set.
+_REPLAY = r"""
+static inline void step(const vd *s, double V, double t, double r, const double *sr, const vd *th, double h, vd *ns) {
+STEP
+}
+void pendulab_run(int m, int n, const double *x0, const double *V, const double *t, const double *r, const double *sr,
+                  const double *P, double h, double *states) {
+    const int groups = (m + LANES - 1) / LANES;
+    #pragma omp parallel for schedule(static)
+    for (int g = 0; g < groups; ++g) {
+        vd s[4], ns[4], th[NTH];
+        for (int l = 0; l < LANES; ++l) {
+            const size_t q = g * LANES + l < m ? g * LANES + l : m - 1;
+            for (int i = 0; i < 4; ++i) s[i][l] = x0[i];
+            for (int i = 0; i < NFREE; ++i) th[i][l] = P[q * NFREE + i];
+        }
+        for (int k = 0; k < n; ++k) {
+            step(s, V[k], t[k], r[k], sr + 4 * (size_t)k, th, h, ns);
+            for (int l = 0; l < LANES && g * LANES + l < m; ++l)
+                for (int i = 0; i < 4; ++i) states[((size_t)(g * LANES + l) * n + k) * 4 + i] = ns[i][l];
+            for (int i = 0; i < 4; ++i) s[i] = ns[i];
+        }
+    }
+}
+"""
+#: The observer's: the step predicts the outputs (``pm``) and corrects the state towards ``y`` (``ns``).
+_OBSERVE = r"""
+static inline void step(const vd *s, double V, double t, const double *y, const double *gain, const vd *th, double h, vd *ns, vd *pm) {
+STEP
+}
+void pendulab_run(int m, int n, const double *x0, const double *V, const double *t, const double *y, const double *gain,
+                  const double *P, double h, double *predicted, double *corrected) {
+    const int groups = (m + LANES - 1) / LANES;
+    #pragma omp parallel for schedule(static)
+    for (int g = 0; g < groups; ++g) {
+        vd s[4], ns[4], pm[NY], th[NTH];
+        for (int l = 0; l < LANES; ++l) {
+            const size_t q = g * LANES + l < m ? g * LANES + l : m - 1;
+            for (int i = 0; i < 4; ++i) s[i][l] = x0[i];
+            for (int i = 0; i < NFREE; ++i) th[i][l] = P[q * NFREE + i];
+        }
+        for (int k = 0; k < n; ++k) {
+            step(s, V[k], t[k], y + NY * (size_t)k, gain, th, h, ns, pm);
+            for (int l = 0; l < LANES && g * LANES + l < m; ++l) {
+                const size_t row = (size_t)(g * LANES + l) * n + k;
+                for (int i = 0; i < NY; ++i) predicted[row * NY + i] = pm[i][l];
+                for (int i = 0; i < 4; ++i) corrected[row * 4 + i] = ns[i][l];
+            }
+            for (int i = 0; i < 4; ++i) s[i] = ns[i];
+        }
+    }
+}
+"""
 
 
 @lru_cache(maxsize=None)
-def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One chunk of :data:`CHUNK` samples for ``n_sets`` parameter sets, compiled to C where it can be.
+def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
+    """One sample of the replay, or of the observer of ``observer`` outputs (1: the position; 2: and the angle).
 
-    The replay: ``F(s0[4 x m], V[1 x C], t[1 x C], restart[1 x C], s_restart[4 x C], theta[n_free x m], h)
-    -> states[4 x C*m]``. The observer of ``observer`` outputs (1: the position; 2: and the angle; see
-    :func:`observe`): ``F(s0[4 x m], V, t, y[ny x C], gain[4 x ny], theta, h) -> (s_end[4 x m],
-    predicted[ny x C*m], corrected[4 x C*m])``.
-
-    Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are inputs; the others are
-    compiled in as the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
+    The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where
+    ``r > 0.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], theta, h) -> (corrected[4], predicted[ny],
+    corrected[4])``. Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are inputs; the
+    others are the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
     """
     step = step_function(False, n_sub).expand()
     s, V, t, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
@@ -69,38 +108,51 @@ def _chunk_function(n_sub: int, n_sets: int, free: tuple[int, ...], fixed: tuple
     for j, i in enumerate(free):
         entries[i] = theta[j]
     p = ca.vertcat(*entries)
-    # MX, so that the chunk stays a loop over the one step in the generated C instead of being unrolled.
-    s0, Vc, tc, thc, hc = ca.MX.sym("s0", 4), ca.MX.sym("V", 1, CHUNK), ca.MX.sym("t", 1, CHUNK), ca.MX.sym("theta", len(free)), ca.MX.sym("h")
     if observer:
-        ny = observer
-        y, gain = ca.SX.sym("y", ny), ca.SX.sym("gain", 4, ny)
+        y, gain = ca.SX.sym("y", observer), ca.SX.sym("gain", 4, observer)
         predicted = step(s, V, p, t, h)
-        measured = predicted[[0, 2][:ny]]
+        measured = predicted[[0, 2][:observer]]
         corrected = predicted + ca.mtimes(gain, y - measured)
-        one = ca.Function("observe_step", [s, V, t, y, gain, theta, h], [corrected, measured, corrected])
-        yc, gc = ca.MX.sym("y", ny, CHUNK), ca.MX.sym("gain", 4, ny)
-        _, positions, states = one.mapaccum("observe_chunk", CHUNK, [0], [0])(s0, Vc, tc, yc, ca.repmat(gc, 1, CHUNK), ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
-        chunk = ca.Function("observe_chunk1", [s0, Vc, tc, yc, gc, thc, hc], [states[:, -1], positions, states])
+        return ca.Function("observe_step", [s, V, t, y, gain, theta, h], [corrected, measured, corrected])
+    r, sr = ca.SX.sym("r"), ca.SX.sym("sr", 4)
+    return ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
+
+
+def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> str:
+    """The C of :data:`_REPLAY` (or :data:`_OBSERVE`) around :func:`_step`, over :mod:`pendulab.simd`'s lanes."""
+    one = _step(n_sub, free, fixed, observer)
+    broadcast = lambda name: lambda j: f"bc({name})"  # noqa: E731  (the same for every set)
+    if observer:
+        inputs = [lambda j: f"s[{j}]", broadcast("V"), broadcast("t"), lambda j: f"bc(y[{j}])", lambda j: f"bc(gain[{j}])", lambda j: f"th[{j}]", broadcast("h")]
+        outputs = [lambda j, e: f"ns[{j}] = {e};", lambda j, e: f"pm[{j}] = {e};", lambda j, e: ""]
     else:
-        r, sr = ca.SX.sym("r"), ca.SX.sym("sr", 4)
-        one = ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
-        rc, src = ca.MX.sym("r", 1, CHUNK), ca.MX.sym("sr", 4, CHUNK)
-        states = one.mapaccum("replay_chunk", CHUNK)(s0, Vc, tc, rc, src, ca.repmat(thc, 1, CHUNK), ca.repmat(hc, 1, CHUNK))
-        chunk = ca.Function("replay_chunk1", [s0, Vc, tc, rc, src, thc, hc], [states])
-    tag = hashlib.sha256(repr((n_sub, n_sets, free, fixed) + (("observer", observer, "states") if observer else ())).encode()).hexdigest()[:10]
+        inputs = [lambda j: f"s[{j}]", broadcast("V"), broadcast("t"), broadcast("r"), lambda j: f"bc(sr[{j}])", lambda j: f"th[{j}]", broadcast("h")]
+        outputs = [lambda j, e: f"ns[{j}] = {e};"]
+    defines = f"#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
+    return simd.PRELUDE + defines + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs))
+
+
+def _load(source: str, name: str, flags: Sequence[str]):
+    """``pendulab_run`` of ``source`` compiled with ``flags`` (cached per machine), or None."""
+    library = shared_library(source, name, flags=(*flags, "-fopenmp", *EXACT_MATH), salt=simd.salt(), kind="fit", prebuilt=False)
+    if library is None:
+        return None
+    run = ctypes.CDLL(str(library.path)).pendulab_run
+    run.restype = None
+    return run
+
+
+@lru_cache(maxsize=None)
+def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, single: bool = False):
+    """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`), in as many lanes as
+    :func:`pendulab.simd.lanes` says (``single``: one, for a lone parameter set), at the machine's own vector
+    width (else the baseline's); None without a working compiler."""
+    tag = hashlib.sha256(repr((n_sub, free, fixed, observer)).encode()).hexdigest()[:10]
     name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
-    shared = [1, 2, 3, 4, 6]  # everything but the state and the parameters is the same for every set
-    if n_sets > 1:
-        # The parameter sets in parallel on the machine's cores (OpenMP in the generated C). CasADi's own
-        # build has no OpenMP and warns about its evaluator, which is not used here: the warning is dropped.
-        with contextlib.redirect_stderr(io.StringIO()):
-            parallel = chunk.map(name, "openmp", n_sets, shared, [])
-        library, _ = _compile([parallel], name, optimize="-O2", flags=("-fopenmp", *EXACT_MATH))
-        if library:
-            return ca.external(name, library)
-    f = chunk.map(name, "serial", n_sets, shared, [])
-    library, _ = _compile([f], name, optimize="-O2", flags=EXACT_MATH)
-    return ca.external(name, library) if library else f
+    source = _source(n_sub, free, fixed, observer)
+    width = 1 if single else simd.lanes(_step(n_sub, free, fixed, observer))
+    lanes = (f"-DLANES={width}",) if width else ()
+    return _load(source, name, (*simd.FLAGS, *lanes)) or _load(source, name, ("-O2", *lanes))
 
 
 def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, ...], tuple[float, ...]]:
@@ -111,28 +163,36 @@ def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, .
     return free_idx, tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vector))
 
 
-def _inputs(vectors: np.ndarray, V: np.ndarray, t: np.ndarray, free: Sequence[str] | None, observer: int = 0) -> tuple:
-    """What :func:`replay` and :func:`observe` share: the chunk function for ``vectors``, the voltage and times
-    padded to whole chunks, the free parameters of every set (flat) and the sub-step."""
-    n = len(V)
-    period = float(t[1] - t[0]) if n > 1 else 1e-3
+def _key(vectors: np.ndarray, t: np.ndarray, free: Sequence[str] | None) -> tuple[tuple, np.ndarray, float]:
+    """What :func:`replay` and :func:`observe` share: the key of the compiled step (sub-steps, free, fixed), the
+    free parameters of every set (``(m, n_free)``, C order) and the sub-step."""
+    period = float(t[1] - t[0]) if len(t) > 1 else 1e-3
     n_sub = substeps(period, MAX_SUBSTEP)
     free_idx, fixed = _split(vectors[0], free)
-    size = -(-n // CHUNK) * CHUNK
-    Vp, tp = np.zeros(size), t[0] + period * np.arange(size)
-    Vp[:n], tp[:n] = V, t
-    P = np.ascontiguousarray(vectors[:, free_idx]).ravel()
-    return _chunk_function(n_sub, len(vectors), free_idx, fixed, observer), Vp, tp, P, np.array([period / n_sub])
+    return (n_sub, free_idx, fixed), np.ascontiguousarray(vectors[:, free_idx]), period / n_sub
+
+
+def _pointer(a: np.ndarray):
+    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+def _in_vm(one: ca.Function, x0: np.ndarray, per_sample: list, P: np.ndarray, h: float) -> list[np.ndarray]:
+    """Without a compiler: ``one`` over the log in CasADi's virtual machine, one set at a time; each of its
+    outputs as ``(m, n, size)``. ``per_sample``: the inputs between the state and the parameters, a column per sample."""
+    n = per_sample[0].shape[1]
+    f = one.mapaccum("in_vm", n)  # the state (first input, first output) carried from sample to sample
+    rows = [f(x0, *per_sample, ca.repmat(ca.DM(theta), 1, n), ca.repmat(h, 1, n)) for theta in P]
+    rows = [r if isinstance(r, (list, tuple)) else [r] for r in rows]
+    return [np.stack([np.asarray(r[i]).T for r in rows]) for i in range(len(rows[0]))]
 
 
 def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> None:
-    """Build (or load) the compiled replays for every width in :data:`SET_COUNTS` ahead of use."""
+    """Build (or load) the compiled replay and observer for each sample period ahead of use."""
     free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
     for period in sorted(set(periods)):
-        for m in SET_COUNTS:
-            _chunk_function(substeps(period, MAX_SUBSTEP), m, free_idx, fixed)
-            if m > 1:  # the fit's search runs on the observer (pendulab.calibration._observer)
-                _chunk_function(substeps(period, MAX_SUBSTEP), m, free_idx, fixed, 2 if params.Mp > 0 else 1)
+        for single in (False, True):  # batches, and the check's lone set
+            _compiled(substeps(period, MAX_SUBSTEP), free_idx, fixed, single=single)
+        _compiled(substeps(period, MAX_SUBSTEP), free_idx, fixed, 2 if params.Mp > 0 else 1)  # the search's observer
 
 
 def replay(
@@ -174,48 +234,24 @@ def replay(
         np.array([q.as_vector() for q in params], dtype=float) if isinstance(params, list) and params and isinstance(params[0], PlantParameters) else np.asarray(params, dtype=float)
     )
     m, n = vectors.shape[0], len(V)
-    if m not in SET_COUNTS:
-        # A few compiled widths serve any number of sets: pad with copies of the first, or split.
-        width = next((w for w in SET_COUNTS if w >= m), SET_COUNTS[-1])
-        if m > width:
-            return np.concatenate([replay(vectors[i : i + width], V, t, x0, restarts, free=free) for i in range(0, m, width)])
-        padded = np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))])
-        return replay(padded, V, t, x0, restarts, free=free)[:m]
-    f, Vp, tp, P, h = _inputs(vectors, V, t, free)
-    size, n_chunks = len(Vp), len(Vp) // CHUNK
-    rp = np.zeros(size)
-    srp = np.zeros((4, size))
+    key, P, h = _key(vectors, t, free)
+    V, t, x0 = (np.ascontiguousarray(a, dtype=float) for a in (V, t, x0))
+    r, sr = np.zeros(n), np.zeros((n, 4))
     for k, state in (restarts or {}).items():
         if 0 <= k < n:
-            rp[k] = 1.0
-            srp[:, k] = state
-    # The compiled function reads and writes these arrays in place (a FunctionBuffer: no conversion to
-    # and from CasADi's DM, which cost a fifth of a fit's time). CasADi's layout is column-major: a
-    # (4 x m) matrix is a (m, 4) array here, and the result (4 x CHUNK*m) is (m, CHUNK, 4).
-    state = np.tile(np.asarray(x0, dtype=float), m)
-    V_in, t_in, r_in, sr_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(CHUNK), np.empty(4 * CHUNK)
-    result = np.empty(4 * CHUNK * m)
-    buffer, evaluate = f.buffer()
-    for i, a in enumerate((state, V_in, t_in, r_in, sr_in, P, h)):
-        buffer.set_arg(i, a.data)
-    buffer.set_res(0, result.data)
-    out = np.empty((m, size, 4))
-    states = result.reshape(m, CHUNK, 4)
-    for c in range(n_chunks):
-        sl = slice(c * CHUNK, (c + 1) * CHUNK)
-        V_in[:], t_in[:], r_in[:] = Vp[sl], tp[sl], rp[sl]
-        sr_in[:] = srp[:, sl].T.ravel()
-        evaluate()
-        out[:, sl, :] = states
-        state[:] = states[:, -1, :].ravel()
-    return out[:, :n, :]
+            r[k], sr[k] = 1.0, state
+    run = _compiled(*key, single=m == 1)
+    if run is None:
+        return _in_vm(_step(*key), x0, [V[None], t[None], r[None], sr.T], P, h)[0]
+    states = np.empty((m, n, 4))
+    run(ctypes.c_int(m), ctypes.c_int(n), *map(_pointer, (x0, V, t, r, sr, P)), ctypes.c_double(h), _pointer(states))
+    return states
 
 
 def observer_compiled(params: PlantParameters, period: float, free: Sequence[str]) -> bool:
     """Whether :func:`observe` runs as compiled C here (else in CasADi's virtual machine, many times slower)."""
     free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
-    outputs = 2 if params.Mp > 0 else 1
-    return _chunk_function(substeps(period, MAX_SUBSTEP), SET_COUNTS[1], free_idx, fixed, outputs).class_name() == "External"
+    return _compiled(substeps(period, MAX_SUBSTEP), free_idx, fixed, 2 if params.Mp > 0 else 1) is not None
 
 
 def observe(
@@ -250,35 +286,16 @@ def observe(
     """
     vectors = np.atleast_2d(np.asarray(params, dtype=float))
     m, n = vectors.shape[0], len(V)
-    Y = np.asarray(y, dtype=float).reshape(n, -1)
+    Y = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(n, -1))
     ny = Y.shape[1]
-    width = next((w for w in SET_COUNTS[1:] if w >= m), SET_COUNTS[-1])
-    if m != width:
-        parts = [vectors[i : i + width] for i in range(0, m, width)] if m > width else [np.vstack([vectors, np.tile(vectors[:1], (width - m, 1))])]
-        done = [observe(q, V, t, y, x0, gain, free=free, states=True) for q in parts]
-        predicted, corrected = np.concatenate([d[0] for d in done])[:m], np.concatenate([d[1] for d in done])[:m]
-        return (predicted, corrected) if states else predicted
-    f, Vp, tp, P, h = _inputs(vectors, V, t, free, ny)
-    size, n_chunks = len(Vp), len(Vp) // CHUNK
-    yp = np.zeros((size, ny))
-    yp[:n] = Y
-    # In place, as in replay(): column-major (4 x m) is (m, 4) here; the outputs (ny x CHUNK*m) are (m, CHUNK, ny).
-    state = np.tile(np.asarray(x0, dtype=float), m)
-    V_in, t_in, y_in = np.empty(CHUNK), np.empty(CHUNK), np.empty(ny * CHUNK)
-    g = np.asarray(gain, dtype=float).reshape(4, ny).T.ravel().copy()  # column-major (4 x ny)
-    end, predicted, corrected = np.empty(4 * m), np.empty(ny * CHUNK * m), np.empty(4 * CHUNK * m)
-    buffer, evaluate = f.buffer()
-    for i, a in enumerate((state, V_in, t_in, y_in, g, P, h)):
-        buffer.set_arg(i, a.data)
-    for i, a in enumerate((end, predicted, corrected)):
-        buffer.set_res(i, a.data)
-    out, estimates = np.empty((m, size, ny)), np.empty((m, size, 4))
-    for c in range(n_chunks):
-        sl = slice(c * CHUNK, (c + 1) * CHUNK)
-        V_in[:], t_in[:], y_in[:] = Vp[sl], tp[sl], yp[sl].ravel()
-        evaluate()
-        out[:, sl] = predicted.reshape(m, CHUNK, ny)
-        estimates[:, sl] = corrected.reshape(m, CHUNK, 4)
-        state[:] = end
-    out = out[:, :n, 0] if np.ndim(y) == 1 else out[:, :n]
-    return (out, estimates[:, :n]) if states else out
+    key, P, h = _key(vectors, t, free)
+    V, t, x0 = (np.ascontiguousarray(a, dtype=float) for a in (V, t, x0))
+    g = np.asarray(gain, dtype=float).reshape(4, ny).T.ravel().copy()  # column-major (4 x ny), as CasADi's
+    run = _compiled(*key, ny, single=m == 1)
+    if run is None:
+        corrected, predicted, _ = _in_vm(_step(*key, ny), x0, [V[None], t[None], Y.T, ca.repmat(ca.DM(g).reshape((4, ny)), 1, n)], P, h)
+    else:
+        predicted, corrected = np.empty((m, n, ny)), np.empty((m, n, 4))
+        run(ctypes.c_int(m), ctypes.c_int(n), *map(_pointer, (x0, V, t, Y, g, P)), ctypes.c_double(h), _pointer(predicted), _pointer(corrected))
+    out = predicted[:, :, 0] if np.ndim(y) == 1 else predicted
+    return (out, corrected) if states else out
