@@ -70,9 +70,9 @@ def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set():
 
 @pytest.mark.parametrize("observer", [0, 2])
 def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer):
-    """The replay (with restarts) and the observer of the position and the angle, built for 1, 2, 4 and 8 lanes,
-    against the same step evaluated in CasADi's virtual machine: equal bit for bit, for the pendulum's
-    sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them)."""
+    """The replay (with restarts) and the observer of the position and the angle, built for 1, 2, 4 and 8 lanes
+    in one group or 4 interleaved, against the same step evaluated in CasADi's virtual machine: equal bit for bit,
+    for the pendulum's sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them)."""
     import casadi as ca
     import numpy as np
 
@@ -100,11 +100,10 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer):
         per_sample = [log.V[None], log.t[None], r[None], sr.T]
         outputs = [np.empty((5, n, 4))]
     vm = _replay._in_vm(_replay._step(*key, observer), x0, per_sample, P, h)
-    source = _replay._source(*key, observer)
-    for lanes in (1, 2, 4, 8):
-        run = _replay._load(source, f"pendulab_lanes_test_{observer}", ("-O2", f"-DLANES={lanes}"))
+    for lanes, ways in ((1, 1), (2, 4), (4, 4), (8, 1)):
+        run = _replay._load(_replay._source(*key, observer, ways), f"pendulab_lanes_test_{observer}", ("-O2", f"-DLANES={lanes}"))
         assert run is not None, "no C compiler"
         arrays = [np.ascontiguousarray(a, dtype=float) for a in inputs]
         run(ctypes.c_int(5), ctypes.c_int(n), *map(_replay._pointer, arrays), ctypes.c_double(h), *map(_replay._pointer, outputs[::-1]))
         for got, want in zip(outputs, vm):
-            assert np.all(np.isfinite(got)) and np.array_equal(got, want), lanes
+            assert np.all(np.isfinite(got)) and np.array_equal(got, want), (lanes, ways)

@@ -7,30 +7,32 @@ a comparison a lane mask, ``if_else`` a blend, no branches. Each lane does exact
 in CasADi's order (IEEE, no reassociation, no contraction), so the results are those of CasADi's virtual
 machine, bit for bit, whatever the lane width or the CPU (``tests/test_fit_reproducible.py``).
 
-The width is the widest the compiler's target has (``-march=native``, :data:`FLAGS`): 8 lanes with
-AVX-512, 4 with AVX, 2 otherwise (SSE2, every x86-64).
+The width: 4 lanes where the compiler's target has AVX (``-march=native``, :data:`FLAGS`; 8 lanes of
+AVX-512 were slower than 4 groups of 4 interleaved), 2 otherwise (SSE2, every x86-64), and
+:func:`lanes` says where 2 suit better anyway.
 
 Examples
 --------
 >>> import casadi as ca
 >>> x, y = ca.SX.sym("x"), ca.SX.sym("y")
 >>> f = ca.Function("f", [x, y], [ca.if_else(x < y, x * y, 2.0)])
->>> print(statements(f, [lambda j: "a", lambda j: "b"], [lambda j, e: f"out = {e};"]))
-vd w0, w1, w2;
-w0 = a;
-w1 = b;
-w2 = truth(w0 < w1);
-w0 = w0 * w1;
-w0 = (vd)((vl)w0 & (w2 != 0));
-w2 = truth(w2 == 0);
-w1 = bc(2.0);
-w2 = (vd)((vl)w1 & (w2 != 0));
-w0 = w0 + w2;
-out = w0;
+>>> print(statements(f, [lambda j, g: "a", lambda j, g: "b"], [lambda j, e, g: f"out = {e};"]))
+vd w0_0, w0_1, w0_2;
+w0_0 = a;
+w0_1 = b;
+w0_2 = truth(w0_0 < w0_1);
+w0_0 = w0_0 * w0_1;
+w0_0 = (vd)((vl)w0_0 & (w0_2 != 0));
+w0_2 = truth(w0_2 == 0);
+w0_1 = bc(2.0);
+w0_2 = (vd)((vl)w0_1 & (w0_2 != 0));
+w0_0 = w0_0 + w0_2;
+out = w0_0;
 """
 
 from __future__ import annotations
 
+import math
 import platform
 from typing import Callable, Sequence
 
@@ -41,9 +43,7 @@ PRELUDE = r"""
 #include <math.h>
 #include <stddef.h>
 #ifndef LANES
-#if defined(__AVX512F__)
-#define LANES 8
-#elif defined(__AVX__)
+#if defined(__AVX__)
 #define LANES 4
 #else
 #define LANES 2
@@ -70,8 +70,8 @@ _LIBM = {"SIN": "sin", "COS": "cos", "TAN": "tan", "FLOOR": "floor", "CEIL": "ce
 
 def lanes(f: ca.Function) -> int | None:
     """How many lanes suit ``f``: 2 where it calls the C library (the lanes wait for one scalar call after another,
-    and wider vectors only add their packing: the pendulum's sines run 1.7 times slower in 4 lanes than in 2),
-    else None, the target's widest (a cart's step: 5 times faster in 8 lanes than CasADi's scalar C)."""
+    and wider vectors only add their packing: the pendulum's step runs 2.6 times slower in 4 lanes than in 2),
+    else None: the target's (:data:`PRELUDE`)."""
     return 2 if any(_OPS[f.instruction_id(k)] in _LIBM for k in range(f.n_instructions())) else None
 
 
@@ -86,51 +86,59 @@ def salt() -> str:
     return f"{platform.machine()} {platform.processor()} {flags.strip()}"
 
 
-def statements(f: ca.Function, inputs: Sequence[Callable[[int], str]], outputs: Sequence[Callable[[int, str], str]]) -> str:
-    """The C statements that evaluate the SX function ``f`` over lanes.
+def statements(
+    f: ca.Function, inputs: Sequence[Callable[[int, int], str]], outputs: Sequence[Callable[[int, str, int], str]], ways: int = 1
+) -> str:
+    """The C statements that evaluate the SX function ``f`` over lanes, ``ways`` groups of lanes interleaved.
 
-    ``inputs[i](j)`` is the C expression (a ``vd``) of input ``i``'s nonzero ``j``; ``outputs[o](j, e)`` the
-    statement that stores the expression ``e`` as output ``o``'s nonzero ``j``. Work variables are CasADi's own
-    (``f.sz_w()`` of them, reused as its code generator reuses them).
+    ``inputs[i](j, g)`` is the C expression (a ``vd``) of input ``i``'s nonzero ``j`` for group ``g``;
+    ``outputs[o](j, e, g)`` the statement that stores the expression ``e`` as output ``o``'s nonzero ``j``.
+    Work variables are CasADi's own (``f.sz_w()`` of them per group, reused as its code generator reuses them).
+    Each instruction is written once per group, side by side: a step's operations form long chains (each waits
+    for the last), and independent groups' chains fill the CPU's pipelines (4 groups of 4 lanes replay a cart's
+    step 3 times faster than one).
     """
-    lines = [f"vd {', '.join(f'w{i}' for i in range(max(f.sz_w(), 1)))};"]
+    lines = [f"vd {', '.join(f'w{g}_{i}' for g in range(ways) for i in range(max(f.sz_w(), 1)))};"]
     for k in range(f.n_instructions()):
-        op, a, o = _OPS[f.instruction_id(k)], f.instruction_input(k), f.instruction_output(k)
-        if op == "INPUT":
-            lines.append(f"w{o[0]} = {inputs[a[0]](a[1])};")
-            continue
-        if op == "OUTPUT":
-            lines.append(outputs[o[0]](o[1], f"w{a[0]}"))
-            continue
-        r, x = f"w{o[0]}", [f"w{i}" for i in a]
-        if op == "CONST":
-            value = f.instruction_constant(k)
-            lines.append(f"{r} = bc({value!r});" if value == value and abs(value) != float("inf") else f"{r} = bc({'NAN' if value != value else ('-' if value < 0 else '') + 'INFINITY'});")
-        elif op in _ARITHMETIC:
-            lines.append(f"{r} = {x[0]} {_ARITHMETIC[op]} {x[1]};")
-        elif op == "NEG":
-            lines.append(f"{r} = -{x[0]};")
-        elif op == "TWICE":
-            lines.append(f"{r} = {x[0]} + {x[0]};")
-        elif op == "SQ":
-            lines.append(f"{r} = {x[0]} * {x[0]};")
-        elif op in _COMPARE:
-            lines.append(f"{r} = truth({x[0]} {_COMPARE[op]} {x[1]});")
-        elif op in ("AND", "OR"):
-            lines.append(f"{r} = truth(({x[0]} != 0) {'&' if op == 'AND' else '|'} ({x[1]} != 0));")
-        elif op == "NOT":
-            lines.append(f"{r} = truth({x[0]} == 0);")
-        elif op == "IF_ELSE_ZERO":
-            lines.append(f"{r} = (vd)((vl){x[1]} & ({x[0]} != 0));")
-        elif op == "FABS":
-            lines.append(f"{r} = (vd)((vl){x[0]} & ~(vl)bc(-0.0));")
-        elif op in ("FMIN", "FMAX"):
-            lines.append(f"{r} = pick({x[0]} {'<' if op == 'FMIN' else '>'} {x[1]}, {x[0]}, {x[1]});")
-        elif op == "SIGN":
-            lines.append(f"{r} = pick({x[0]} < 0, bc(-1.0), pick({x[0]} > 0, bc(1.0), {x[0]}));")
-        elif op in _LIBM:
-            args = ", ".join(f"{v}[l]" for v in x)
-            lines.append(f"{{ vd t_; for (int l = 0; l < LANES; ++l) t_[l] = {_LIBM[op]}({args}); {r} = t_; }}")
-        else:
-            raise NotImplementedError(f"SX operation {op} has no lane form in pendulab.simd")
+        lines += [_statement(f, k, g, inputs, outputs) for g in range(ways)]
     return "\n".join(lines)
+
+
+def _statement(f: ca.Function, k: int, g: int, inputs, outputs) -> str:
+    """Instruction ``k`` of ``f`` for group ``g`` (see :func:`statements`)."""
+    op, a, o = _OPS[f.instruction_id(k)], f.instruction_input(k), f.instruction_output(k)
+    if op == "INPUT":
+        return f"w{g}_{o[0]} = {inputs[a[0]](a[1], g)};"
+    if op == "OUTPUT":
+        return outputs[o[0]](o[1], f"w{g}_{a[0]}", g)
+    r, x = f"w{g}_{o[0]}", [f"w{g}_{i}" for i in a]
+    if op == "CONST":
+        value = f.instruction_constant(k)
+        literal = repr(value) if math.isfinite(value) else "NAN" if math.isnan(value) else ("-" if value < 0 else "") + "INFINITY"
+        return f"{r} = bc({literal});"
+    if op in _ARITHMETIC:
+        return f"{r} = {x[0]} {_ARITHMETIC[op]} {x[1]};"
+    if op == "NEG":
+        return f"{r} = -{x[0]};"
+    if op == "TWICE":
+        return f"{r} = {x[0]} + {x[0]};"
+    if op == "SQ":
+        return f"{r} = {x[0]} * {x[0]};"
+    if op in _COMPARE:
+        return f"{r} = truth({x[0]} {_COMPARE[op]} {x[1]});"
+    if op in ("AND", "OR"):
+        return f"{r} = truth(({x[0]} != 0) {'&' if op == 'AND' else '|'} ({x[1]} != 0));"
+    if op == "NOT":
+        return f"{r} = truth({x[0]} == 0);"
+    if op == "IF_ELSE_ZERO":
+        return f"{r} = (vd)((vl){x[1]} & ({x[0]} != 0));"
+    if op == "FABS":
+        return f"{r} = (vd)((vl){x[0]} & ~(vl)bc(-0.0));"
+    if op in ("FMIN", "FMAX"):  # as the virtual machine's: a NaN loses, and of two equal (+0 and -0) the first
+        return f"{r} = pick(({x[0]} {'<=' if op == 'FMIN' else '>='} {x[1]}) | ({x[1]} != {x[1]}), {x[0]}, {x[1]});"
+    if op == "SIGN":
+        return f"{r} = pick({x[0]} < 0, bc(-1.0), pick({x[0]} > 0, bc(1.0), {x[0]}));"
+    if op in _LIBM:
+        args = ", ".join(f"{v}[l]" for v in x)
+        return f"{{ vd t_; for (int l = 0; l < LANES; ++l) t_[l] = {_LIBM[op]}({args}); {r} = t_; }}"
+    raise NotImplementedError(f"SX operation {op} has no lane form in pendulab.simd")

@@ -36,56 +36,61 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 #: x86-64 machine, vector width and thread count: those of CasADi's virtual machine.
 EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
 
-#: Around one sample's step (``STEP``): each thread takes LANES parameter sets at a time through the whole log
-#: (a short last group repeats the last set). The replay's step restarts from ``sr`` where ``r`` is set.
+#: Groups of lanes interleaved in one thread (:func:`pendulab.simd.statements`): each thread takes WAYS x LANES
+#: parameter sets at a time through the whole log (a short last group repeats the last set).
+WAYS = 4
+
+#: Around one sample's step (``STEP``); the replay's step restarts from ``sr`` where ``r`` is set.
 _REPLAY = r"""
-static inline void step(const vd *s, double V, double t, double r, const double *sr, const vd *th, double h, vd *ns) {
+static inline void step(vd (*s)[4], double V, double t, double r, const double *sr, vd (*th)[NTH], double h, vd (*ns)[4]) {
 STEP
 }
 void pendulab_run(int m, int n, const double *x0, const double *V, const double *t, const double *r, const double *sr,
                   const double *P, double h, double *states) {
-    const int groups = (m + LANES - 1) / LANES;
+    const int size = WAYS * LANES, groups = (m + size - 1) / size;
     #pragma omp parallel for schedule(static)
     for (int g = 0; g < groups; ++g) {
-        vd s[4], ns[4], th[NTH];
-        for (int l = 0; l < LANES; ++l) {
-            const size_t q = g * LANES + l < m ? g * LANES + l : m - 1;
-            for (int i = 0; i < 4; ++i) s[i][l] = x0[i];
-            for (int i = 0; i < NFREE; ++i) th[i][l] = P[q * NFREE + i];
+        vd s[WAYS][4], ns[WAYS][4], th[WAYS][NTH];
+        for (int q = 0; q < size; ++q) {
+            const size_t set = g * size + q < m ? g * size + q : m - 1;
+            for (int i = 0; i < 4; ++i) s[q / LANES][i][q % LANES] = x0[i];
+            for (int i = 0; i < NFREE; ++i) th[q / LANES][i][q % LANES] = P[set * NFREE + i];
         }
         for (int k = 0; k < n; ++k) {
             step(s, V[k], t[k], r[k], sr + 4 * (size_t)k, th, h, ns);
-            for (int l = 0; l < LANES && g * LANES + l < m; ++l)
-                for (int i = 0; i < 4; ++i) states[((size_t)(g * LANES + l) * n + k) * 4 + i] = ns[i][l];
-            for (int i = 0; i < 4; ++i) s[i] = ns[i];
+            for (int q = 0; q < size && g * size + q < m; ++q)
+                for (int i = 0; i < 4; ++i) states[((size_t)(g * size + q) * n + k) * 4 + i] = ns[q / LANES][i][q % LANES];
+            for (int w = 0; w < WAYS; ++w)
+                for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
         }
     }
 }
 """
 #: The observer's: the step predicts the outputs (``pm``) and corrects the state towards ``y`` (``ns``).
 _OBSERVE = r"""
-static inline void step(const vd *s, double V, double t, const double *y, const double *gain, const vd *th, double h, vd *ns, vd *pm) {
+static inline void step(vd (*s)[4], double V, double t, const double *y, const double *gain, vd (*th)[NTH], double h, vd (*ns)[4], vd (*pm)[NY]) {
 STEP
 }
 void pendulab_run(int m, int n, const double *x0, const double *V, const double *t, const double *y, const double *gain,
                   const double *P, double h, double *predicted, double *corrected) {
-    const int groups = (m + LANES - 1) / LANES;
+    const int size = WAYS * LANES, groups = (m + size - 1) / size;
     #pragma omp parallel for schedule(static)
     for (int g = 0; g < groups; ++g) {
-        vd s[4], ns[4], pm[NY], th[NTH];
-        for (int l = 0; l < LANES; ++l) {
-            const size_t q = g * LANES + l < m ? g * LANES + l : m - 1;
-            for (int i = 0; i < 4; ++i) s[i][l] = x0[i];
-            for (int i = 0; i < NFREE; ++i) th[i][l] = P[q * NFREE + i];
+        vd s[WAYS][4], ns[WAYS][4], pm[WAYS][NY], th[WAYS][NTH];
+        for (int q = 0; q < size; ++q) {
+            const size_t set = g * size + q < m ? g * size + q : m - 1;
+            for (int i = 0; i < 4; ++i) s[q / LANES][i][q % LANES] = x0[i];
+            for (int i = 0; i < NFREE; ++i) th[q / LANES][i][q % LANES] = P[set * NFREE + i];
         }
         for (int k = 0; k < n; ++k) {
             step(s, V[k], t[k], y + NY * (size_t)k, gain, th, h, ns, pm);
-            for (int l = 0; l < LANES && g * LANES + l < m; ++l) {
-                const size_t row = (size_t)(g * LANES + l) * n + k;
-                for (int i = 0; i < NY; ++i) predicted[row * NY + i] = pm[i][l];
-                for (int i = 0; i < 4; ++i) corrected[row * 4 + i] = ns[i][l];
+            for (int q = 0; q < size && g * size + q < m; ++q) {
+                const size_t row = (size_t)(g * size + q) * n + k;
+                for (int i = 0; i < NY; ++i) predicted[row * NY + i] = pm[q / LANES][i][q % LANES];
+                for (int i = 0; i < 4; ++i) corrected[row * 4 + i] = ns[q / LANES][i][q % LANES];
             }
-            for (int i = 0; i < 4; ++i) s[i] = ns[i];
+            for (int w = 0; w < WAYS; ++w)
+                for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
         }
     }
 }
@@ -118,18 +123,18 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
     return ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
 
 
-def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> str:
+def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, ways: int = WAYS) -> str:
     """The C of :data:`_REPLAY` (or :data:`_OBSERVE`) around :func:`_step`, over :mod:`pendulab.simd`'s lanes."""
     one = _step(n_sub, free, fixed, observer)
-    broadcast = lambda name: lambda j: f"bc({name})"  # noqa: E731  (the same for every set)
+    broadcast = lambda name: lambda j, g: f"bc({name})"  # noqa: E731  (the same for every set)
     if observer:
-        inputs = [lambda j: f"s[{j}]", broadcast("V"), broadcast("t"), lambda j: f"bc(y[{j}])", lambda j: f"bc(gain[{j}])", lambda j: f"th[{j}]", broadcast("h")]
-        outputs = [lambda j, e: f"ns[{j}] = {e};", lambda j, e: f"pm[{j}] = {e};", lambda j, e: ""]
+        inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), lambda j, g: f"bc(y[{j}])", lambda j, g: f"bc(gain[{j}])", lambda j, g: f"th[{g}][{j}]", broadcast("h")]
+        outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};", lambda j, e, g: f"pm[{g}][{j}] = {e};", lambda j, e, g: ""]
     else:
-        inputs = [lambda j: f"s[{j}]", broadcast("V"), broadcast("t"), broadcast("r"), lambda j: f"bc(sr[{j}])", lambda j: f"th[{j}]", broadcast("h")]
-        outputs = [lambda j, e: f"ns[{j}] = {e};"]
-    defines = f"#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
-    return simd.PRELUDE + defines + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs))
+        inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), broadcast("r"), lambda j, g: f"bc(sr[{j}])", lambda j, g: f"th[{g}][{j}]", broadcast("h")]
+        outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};"]
+    defines = f"#define WAYS {ways}\n#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
+    return simd.PRELUDE + defines + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs, ways))
 
 
 def _load(source: str, name: str, flags: Sequence[str]):
@@ -145,11 +150,11 @@ def _load(source: str, name: str, flags: Sequence[str]):
 @lru_cache(maxsize=None)
 def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, single: bool = False):
     """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`), in as many lanes as
-    :func:`pendulab.simd.lanes` says (``single``: one, for a lone parameter set), at the machine's own vector
+    :func:`pendulab.simd.lanes` says, :data:`WAYS` groups of them (``single``: one lane, for a lone parameter set), at the machine's own vector
     width (else the baseline's); None without a working compiler."""
     tag = hashlib.sha256(repr((n_sub, free, fixed, observer)).encode()).hexdigest()[:10]
     name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
-    source = _source(n_sub, free, fixed, observer)
+    source = _source(n_sub, free, fixed, observer, 1 if single else WAYS)
     width = 1 if single else simd.lanes(_step(n_sub, free, fixed, observer))
     lanes = (f"-DLANES={width}",) if width else ()
     return _load(source, name, (*simd.FLAGS, *lanes)) or _load(source, name, ("-O2", *lanes))
