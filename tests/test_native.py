@@ -87,26 +87,48 @@ def test_cc_is_honoured_and_a_failing_compiler_falls_back(cache, monkeypatch, tm
     assert len(record.read_text().splitlines()) == 2 and "-shared" in record.read_text()
 
 
-def test_fit_functions_fall_back_to_casadis_virtual_machine(no_compiler, cache):
-    import casadi as ca
+def test_fit_functions_fall_back_to_casadis_virtual_machine(monkeypatch, cache):
+    """Without a compiler the fit's replay and observer run in CasADi's virtual machine, with the compiled ones' bits."""
+    import numpy as np
 
-    from pendulab.calibration._replay import _compile  # private: the fit's compile step must go through pendulab.native
+    from pendulab.calibration import _replay  # private: the fit's compile step must fall back, not fail
+    from pendulab.model.parameters import PlantParameters
 
-    x = ca.SX.sym("x")
-    assert _compile([ca.Function("twice", [x], [2 * x])], "pendulab_test_twice") == (None, False)
+    sets = np.array([PlantParameters.preset("none", Beq=b).as_vector() for b in (4.0, 6.5, 9.0)], dtype=float)
+    t, V = np.arange(300) * 1e-3, np.r_[np.full(150, 3.0), np.full(150, -2.0)]
+    compiler = native.find_compiler()
+    restart = {100: np.array([0.01, 0.0, 0.0, 0.0])}
+    monkeypatch.setattr(native, "find_compiler", lambda: None)
+    _replay._compiled.cache_clear()
+    try:
+        assert not _replay.observer_compiled(PlantParameters.preset("none"), 1e-3, ("Beq",))
+        in_vm = _replay.replay(sets, V, t, np.zeros(4), restart, free=("Beq",))
+        assert not any(cache.rglob("pendulab_replay*"))
+        if compiler:
+            monkeypatch.setattr(native, "find_compiler", lambda: compiler)
+            _replay._compiled.cache_clear()
+            assert np.array_equal(in_vm, _replay.replay(sets, V, t, np.zeros(4), restart, free=("Beq",)))
+    finally:
+        _replay._compiled.cache_clear()  # later tests look for the compiler again
+    assert np.ptp(in_vm[:, -1, 0]) > 1e-4  # the sets differ
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
 def test_fit_functions_compile_through_the_helper(cache):
-    import casadi as ca
+    """The fit's C goes through pendulab.native: built once into the cache's ``fit`` folder, then loaded from it."""
+    import numpy as np
 
-    from pendulab.calibration._replay import _compile  # private: the fit's compile step must go through pendulab.native
+    from pendulab.calibration import _replay  # private: the fit's compile step must go through pendulab.native
+    from pendulab.model.parameters import PlantParameters
 
-    x = ca.SX.sym("x")
-    library, built = _compile([ca.Function("thrice", [x], [3 * x])], "pendulab_test_thrice")
-    assert built and Path(library).parent == cache / "fit"
-    assert float(ca.external("thrice", library)(2.0)) == 6.0
-    assert _compile([ca.Function("thrice", [x], [3 * x])], "pendulab_test_thrice") == (library, False)
+    key = _replay._split(np.asarray(PlantParameters.preset("none").as_vector(), dtype=float), ("Beq",))
+    source = _replay._source(10, *key, ways=1)
+    assert _replay._load(source, "pendulab_test_replay", ("-O2", "-DLANES=1")) is not None
+    built = list((cache / "fit").glob("pendulab_test_replay-*"))
+    assert len(built) == 1
+    stamp = built[0].stat().st_mtime_ns
+    assert _replay._load(source, "pendulab_test_replay", ("-O2", "-DLANES=1")) is not None
+    assert [p.stat().st_mtime_ns for p in (cache / "fit").glob("pendulab_test_replay-*")] == [stamp]  # not built again
 
 
 def _stamped(path: Path, name: str, stale: bool = False) -> Path:
