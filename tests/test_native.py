@@ -131,6 +131,28 @@ def test_fit_functions_compile_through_the_helper(cache):
     assert [p.stat().st_mtime_ns for p in (cache / "fit").glob("pendulab_test_replay-*")] == [stamp]  # not built again
 
 
+@pytest.mark.skipif(shutil.which("cc") is None or sys.platform == "win32", reason="needs a POSIX C compiler")
+def test_a_compiler_without_openmp_still_compiles_the_fit(monkeypatch, tmp_path, cache):
+    """Apple's clang has no OpenMP: the fit's C is built without it (its groups of sets one after another), not
+    left to the virtual machine."""
+    import numpy as np
+
+    from pendulab.calibration import _replay  # private: the fit's compile step must go without OpenMP
+    from pendulab.model.parameters import PlantParameters
+
+    record = tmp_path / "calls.txt"
+    script = tmp_path / "bin" / "cc"
+    script.parent.mkdir()
+    script.write_text(f'#!/bin/sh\necho "$@" >> {record}\ncase " $* " in *" -fopenmp "*) exit 1;; esac\nexec {shutil.which("cc")} "$@"\n')
+    script.chmod(0o755)
+    monkeypatch.setenv("CC", str(script))
+    key = _replay._split(np.asarray(PlantParameters.preset("none").as_vector(), dtype=float), ("Beq",))
+    run = _replay._load(_replay._source(10, *key, ways=1), "pendulab_test_no_openmp", ("-O2", "-DLANES=1"))
+    assert run is not None
+    calls = record.read_text().splitlines()
+    assert len(calls) == 2 and "-fopenmp" in calls[0] and "-fopenmp" not in calls[1]
+
+
 def _stamped(path: Path, name: str, stale: bool = False) -> Path:
     """A stand-in FMU file marked as pendulab's (current or stale)."""
     path.mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import sys
 from functools import lru_cache
 from typing import Sequence
 
@@ -138,13 +139,21 @@ def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
 
 
 def _load(source: str, name: str, flags: Sequence[str]):
-    """``pendulab_run`` of ``source`` compiled with ``flags`` (cached per machine), or None."""
-    library = shared_library(source, name, flags=(*flags, "-fopenmp", *EXACT_MATH), salt=simd.salt(), kind="fit", prebuilt=False)
-    if library is None:
-        return None
-    run = ctypes.CDLL(str(library.path)).pendulab_run
-    run.restype = None
-    return run
+    """``pendulab_run`` of ``source`` compiled with ``flags`` and OpenMP, else without (the groups of sets one
+    after another: Apple's clang has no OpenMP), cached per machine; None if no compiler builds it or it does
+    not load here."""
+    for threads in (("-fopenmp",), ()):
+        library = shared_library(source, name, flags=(*flags, *threads, *EXACT_MATH), salt=simd.salt(), kind="fit", prebuilt=False)
+        if library is None:
+            continue
+        try:
+            # On Windows the OpenMP runtime (MinGW's libgomp) is found on PATH only with the classic search.
+            run = ctypes.CDLL(str(library.path), **({"winmode": 0} if sys.platform == "win32" else {})).pendulab_run
+        except OSError:
+            continue
+        run.restype = None
+        return run
+    return None
 
 
 @lru_cache(maxsize=None)
