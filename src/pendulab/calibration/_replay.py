@@ -158,9 +158,9 @@ def _load(source: str, name: str, flags: Sequence[str]):
 
 @lru_cache(maxsize=None)
 def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, single: bool = False):
-    """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`), in as many lanes as
-    :func:`pendulab.simd.lanes` says, :data:`WAYS` groups of them (``single``: one lane, for a lone parameter set), at the machine's own vector
-    width (else the baseline's); None without a working compiler."""
+    """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`): in as many lanes as
+    :func:`pendulab.simd.lanes` says, :data:`WAYS` groups of them (``single``: one lane, for a lone parameter
+    set), for the machine's own vector width (else the baseline's); None without a working compiler."""
     tag = hashlib.sha256(repr((n_sub, free, fixed, observer)).encode()).hexdigest()[:10]
     name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
     source = _source(n_sub, free, fixed, observer, 1 if single else WAYS)
