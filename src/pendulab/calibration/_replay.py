@@ -41,6 +41,17 @@ EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
 #: parameter sets at a time through the whole log (a short last group repeats the last set).
 WAYS = 4
 
+#: What both drivers share: the lanes of group ``g`` start at ``x0``, each with its set's free parameters.
+_GROUP = r"""
+static inline void start_group(int g, int m, const double *x0, const double *P, vd (*s)[4], vd (*th)[NTH]) {
+    const int size = WAYS * LANES;
+    for (int q = 0; q < size; ++q) {
+        const size_t set = g * size + q < m ? g * size + q : m - 1;
+        for (int i = 0; i < 4; ++i) s[q / LANES][i][q % LANES] = x0[i];
+        for (int i = 0; i < NFREE; ++i) th[q / LANES][i][q % LANES] = P[set * NFREE + i];
+    }
+}
+"""
 #: Around one sample's step (``STEP``); the replay's step restarts from ``sr`` where ``r`` is set.
 _REPLAY = r"""
 static inline void step(vd (*s)[4], double V, double t, double r, const double *sr, vd (*th)[NTH], double h, vd (*ns)[4]) {
@@ -52,11 +63,7 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
     #pragma omp parallel for schedule(static)
     for (int g = 0; g < groups; ++g) {
         vd s[WAYS][4], ns[WAYS][4], th[WAYS][NTH];
-        for (int q = 0; q < size; ++q) {
-            const size_t set = g * size + q < m ? g * size + q : m - 1;
-            for (int i = 0; i < 4; ++i) s[q / LANES][i][q % LANES] = x0[i];
-            for (int i = 0; i < NFREE; ++i) th[q / LANES][i][q % LANES] = P[set * NFREE + i];
-        }
+        start_group(g, m, x0, P, s, th);
         for (int k = 0; k < n; ++k) {
             step(s, V[k], t[k], r[k], sr + 4 * (size_t)k, th, h, ns);
             for (int q = 0; q < size && g * size + q < m; ++q)
@@ -78,11 +85,7 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
     #pragma omp parallel for schedule(static)
     for (int g = 0; g < groups; ++g) {
         vd s[WAYS][4], ns[WAYS][4], pm[WAYS][NY], th[WAYS][NTH];
-        for (int q = 0; q < size; ++q) {
-            const size_t set = g * size + q < m ? g * size + q : m - 1;
-            for (int i = 0; i < 4; ++i) s[q / LANES][i][q % LANES] = x0[i];
-            for (int i = 0; i < NFREE; ++i) th[q / LANES][i][q % LANES] = P[set * NFREE + i];
-        }
+        start_group(g, m, x0, P, s, th);
         for (int k = 0; k < n; ++k) {
             step(s, V[k], t[k], y + NY * (size_t)k, gain, th, h, ns, pm);
             for (int q = 0; q < size && g * size + q < m; ++q) {
@@ -135,7 +138,7 @@ def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
         inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), broadcast("r"), lambda j, g: f"bc(sr[{j}])", lambda j, g: f"th[{g}][{j}]", broadcast("h")]
         outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};"]
     defines = f"#define WAYS {ways}\n#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
-    return simd.PRELUDE + defines + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs, ways))
+    return simd.PRELUDE + defines + _GROUP + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs, ways))
 
 
 def _load(source: str, name: str, flags: Sequence[str]):
