@@ -11,7 +11,7 @@ A seeded third of the cases is held out and printed apart (``--held-out``: run o
 Columns: the case; the true values' replay (encoder steps RMS, restarted at rests, an upright pendulum also every 0.25 s from settled states; the better of the
 logged and the denoised voltage, as the fit chooses); accepted; each parameter's error (%) and status
 (``d`` determined, ``b`` bounded, ``n`` not identified; ``!`` where a determined value lies more than
-3 of its reported sigmas off); the fitted replay (steps); the fit's CPU time (s, this process and its
+3 of its reported sigmas off, ``?`` where a bounded one's reported range excludes the true value); the fitted replay (steps); the fit's CPU time (s, this process and its
 threads) and wall time. ``ok`` is the issue's bar, judged on cases whose true values replay within 1.5 steps.
 
 Usage::
@@ -73,13 +73,15 @@ def run_case(case) -> dict:
         row.update(accepted=False, refused=str(exc), cpu=time.process_time() - cpu, wall=time.perf_counter() - wall)
         return row
     row.update(cpu=time.process_time() - cpu, wall=time.perf_counter() - wall, accepted=result.forward_ok, restarts=result.restarts,
-               steps=result.forward_rms / true.q_x, errors={}, status={}, z={}, values=dict(result.values), sigma=dict(result.uncertainty), allowed=dict(result.allowed))
+               steps=result.forward_rms / true.q_x, errors={}, status={}, z={}, outside={}, values=dict(result.values), sigma=dict(result.uncertainty), allowed=dict(result.allowed))
     for n in result.names:
         value = getattr(true, n)
         row["errors"][n] = result.values[n] / value - 1
         row["status"][n] = result.determination[n]
         sigma = result.uncertainty[n]
         row["z"][n] = abs(result.values[n] - value) / sigma if math.isfinite(sigma) and sigma > 0 else math.nan
+        low, high = result.allowed.get(n, (0.0, math.inf))
+        row["outside"][n] = row["status"][n] == "bounded" and not low <= value <= high
     return row
 
 
@@ -103,7 +105,7 @@ def line(row: dict) -> str:
         return f"{head}  {'no':<4}{'refused: ' + reason:<84}{row['cpu']:>7.1f}{row['wall']:>7.1f}  {judge(row)}"
     cells = []
     for n, label in SHORT.items():
-        mark = row["status"][n][0] + ("!" if row["status"][n] == "determined" and row["z"][n] > 3 else " ")
+        mark = row["status"][n][0] + ("!" if row["status"][n] == "determined" and row["z"][n] > 3 else "?" if row["outside"][n] else " ")
         cells.append(f"{label} {100 * row['errors'][n]:+6.1f}{mark}")
     return f"{head}  {'yes' if row['accepted'] else 'no':<4}{' '.join(cells)}{row['steps']:>7.2f}{row['cpu']:>7.1f}{row['wall']:>7.1f}  {judge(row)}"
 
@@ -116,6 +118,8 @@ def table(rows: list[dict], title: str) -> None:
     judged = [r for r in rows if judge(r) != "-"]
     print(f"bar met on {sum(judge(r) == 'ok' for r in judged)} of {len(judged)} judged cases ({len(rows) - len(judged)} not judged: "
           f"the true values replay worse than 1.5 steps); CPU per fit: median {sorted(r['cpu'] for r in rows)[len(rows) // 2]:.1f} s")
+    outside = sum(sum(r.get("outside", {}).values()) for r in rows)
+    print(f"bounded parameters whose reported range excludes the true value ('?'): {outside} in {len(rows)} cases")
 
 
 def main() -> int:

@@ -181,10 +181,14 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
     q = TRUE.q_x
     found = ("determined", "determined", "bounded", "not identified")
     sigma = np.array([0.01, 0.02, math.inf, math.inf])
-    status, out, note = confidence_of(found, sigma, 1.0 * CONFIDENT_STEPS * q, q)
-    assert status == found and np.array_equal(out, sigma) and note == ""  # replays well: the profile stands
-    status, out, note = confidence_of(found, sigma, 1.5 * CONFIDENT_STEPS * q, q)
+    ranges = {"F1": (2.118, 2.131), "Beq": (61.0, 61.04), "v2": (0.04, math.inf), "B": (0.0, math.inf)}
+    status, out, allowed, note = confidence_of(found, sigma, ranges, 1.0 * CONFIDENT_STEPS * q, q)
+    assert status == found and np.array_equal(out, sigma) and allowed == ranges and note == ""  # replays well: the profile stands
+    status, out, allowed, note = confidence_of(found, sigma, ranges, 1.5 * CONFIDENT_STEPS * q, q)
     assert status == ("bounded", "bounded", "bounded", "not identified") and np.all(np.isinf(out))
+    # ... and no range either: the profile's ranges around a wrong basin's answer exclude the rig's values
+    # (the unseen rig's triangle wave: Beq 61.00 to 61.04, F1 2.118 to 2.131; the rig's are 6.1 and 2.3).
+    assert allowed == {name: (0.0, math.inf) for name in ranges}
     assert f"misses the logs by {1.5 * CONFIDENT_STEPS:.1f} encoder steps" in note
     assert "--calibration FILE --start defaults" in note  # a start the search has not tried: the only advice that helps
     # The calibration file and the summary carry the reason.
@@ -193,12 +197,15 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
         names=("Beq", "force_gain"), values={"Beq": 30.0, "force_gain": 0.8}, initial={"Beq": 4.3, "force_gain": 1.0},
         uncertainty={"Beq": math.inf, "force_gain": math.inf}, residual_rms=1e-4, params=params, n_samples=10,
         iterations=0, success=True, status="test", seconds=0.0, encoder_step=q, forward_rms=1.5 * CONFIDENT_STEPS * q,
-        determination={"Beq": "bounded", "force_gain": "bounded"}, allowed={"Beq": (20.0, 40.0), "force_gain": (0.7, 0.9)},
+        determination={"Beq": "bounded", "force_gain": "bounded"}, allowed={"Beq": (0.0, math.inf), "force_gain": (0.0, math.inf)},
         confidence=note,
     )
     meta = result.to_calibration().metadata
     assert meta["determination_note"] == note and meta["uncertainty"] == {"Beq": None, "force_gain": None}
-    assert result.summary().splitlines()[-1] == note
+    assert meta["allowed_range"] == {"Beq": [0.0, None], "force_gain": [0.0, None]}
+    lines = result.summary().splitlines()
+    assert lines[-1] == note
+    assert "no range known" in lines[1] and "no range known" in lines[2]
 
 
 def test_the_wrong_basin_advice_starts_the_fit_from_the_calibration_file(ramp_test_fit, tmp_path, capsys):

@@ -642,6 +642,12 @@ PROFILE_OFFSETS = (0.003, 0.01, 0.03, 0.1, 0.3, 0.7)
 DETERMINED, BOUNDED, NOT_IDENTIFIED = "determined", "bounded", "not identified"
 #: The friction law's thresholds: the replay cost is a staircase in each (see :func:`profile`).
 THRESHOLDS = ("F1", "v1", "F2", "v2")
+#: A parameter's range (:class:`Profile` ``allowed``) is where the replay cost stays below this many times the
+#: answer's: the true values of the corpus's rigs replay their logs at up to 1.46 times the cost of the answer found
+#: (quantization and noise; ``bench/fit_corpus.py``), and within one chi-square unit of it ranges excluded them.
+RANGE_COST_RATIO = 1.5
+#: A joint direction the cost never bounds on a side takes its members this far (log units) on that side: to the search's bounds.
+JOINT_FAR = 20.0
 #: A parameter uncertain by more than this fraction of its value is only bounded (a range, ``allowed``): on a log
 #: of random steps of the unseen rig, F1 -15 % off came out "determined" to +-30 %.
 MAX_RELATIVE_SIGMA = 0.2
@@ -718,6 +724,10 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     threshold and outwards while it stays below, the move with the other's best value (:func:`valley`).
     No uncertainty is below the finest offset (the cost is a staircase under it); uncertain by more than
     :data:`MAX_RELATIVE_SIGMA` of its value, a parameter is only bounded.
+
+    The ranges (``allowed``) are wider than the status's threshold: where the cost stays below
+    :data:`RANGE_COST_RATIO` times the answer's, along the parameter and along each joint direction it is a
+    member of (to ``0`` or ``inf`` where the cost never rises that far).
     """
     n = len(theta)
     offsets = np.array(PROFILE_OFFSETS)
@@ -750,24 +760,27 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         costs[[i for _, i, _ in chains]] = np.minimum(costs[[i for _, i, _ in chains]], found)
         chains = [(j, i + 1, end) for (j, i, end), c in zip(chains, found) if c <= cost0 + threshold and i + 1 < end]
 
-    def reach(first: int, staircase: bool = False) -> tuple[float, float]:
-        """How far (offset units) the cost stays below the threshold up and down, from trial ``first`` (see above)."""
+    def reach(first: int, staircase: bool = False, rise: float = threshold) -> tuple[float, float]:
+        """How far (offset units) the cost stays below ``cost0 + rise`` up and down, from trial ``first`` (see above)."""
         out = []
         for side in range(2):
             c = costs[first + side * m : first + (side + 1) * m]
-            above = np.flatnonzero(c > cost0 + threshold)
+            above = np.flatnonzero(c > cost0 + rise)
             if not above.size:
                 out.append(math.inf)
                 continue
             i = int(above[0])
             lo_o, lo_c = (0.0, cost0) if i == 0 else (offsets[i - 1], max(c[i - 1], cost0))
-            out.append(offsets[i] if staircase else lo_o + (offsets[i] - lo_o) * (cost0 + threshold - lo_c) / max(c[i] - lo_c, 1e-300))
+            out.append(offsets[i] if staircase else lo_o + (offsets[i] - lo_o) * (cost0 + rise - lo_c) / max(c[i] - lo_c, 1e-300))
         return out[0], out[1]
 
+    # The ranges (``allowed``) reach as far as the true values' own cost may lie above the answer's (RANGE_COST_RATIO).
+    wide = max(threshold, (RANGE_COST_RATIO - 1.0) * cost0)
     status, sigma, allowed = [], np.full(n, math.inf), []
     for j in range(n):
-        up, down = reach(1 + 2 * j * m, space.names[j] in THRESHOLDS)
+        up, down = reach(1 + 2 * j * m, space.names[j] in THRESHOLDS, wide)
         allowed.append((theta[j] * math.exp(-down) if math.isfinite(down) else 0.0, theta[j] * math.exp(up) if math.isfinite(up) else math.inf))
+        up, down = reach(1 + 2 * j * m, space.names[j] in THRESHOLDS)
         if math.isfinite(up) and math.isfinite(down):
             status.append(DETERMINED)
             sigma[j] = abs(theta[j]) * (math.exp(max(up, down)) - 1)
@@ -791,8 +804,16 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     for i, d in enumerate(joint):
         up, down = reach(1 + 2 * n * m + 2 * i * m)
         ends = [moved(space, theta, d, x * widths[d]) for x in (up, -down) if math.isfinite(x)]
+        # A member's range covers the joint move's too: moved alone it may be pinned where moved with the others it is not
+        # (slow ramps on the unseen rig: the common scale 8.7 % low, F1 and the gain bounded to a few tenths of a per cent).
+        far = [moved(space, theta, d, (x if math.isfinite(x) else sign * JOINT_FAR) * widths[d]) for x, sign in zip(reach(1 + 2 * n * m + 2 * i * m, rise=wide), (1.0, -1.0))]
         for j, name in enumerate(space.names):
-            if name not in (SCALED if d == "scale" else ("B", "Beq")) or status[j] != DETERMINED:
+            if name not in (SCALED if d == "scale" else ("B", "Beq")):
+                continue
+            values = [e[j] for e in far]
+            low, high = allowed[j]
+            allowed[j] = (min(low, *values) if min(values) > space.lower[j] else 0.0, max(high, *values) if max(values) < space.upper[j] else math.inf)
+            if status[j] != DETERMINED:
                 continue
             if len(ends) == 2:
                 sigma[j] = max(sigma[j], max(abs(e[j] - theta[j]) for e in ends))

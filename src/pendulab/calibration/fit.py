@@ -231,7 +231,7 @@ class FitResult:
             if status == "determined":
                 spread = f"± {self.uncertainty[name]:.2g}"
             elif status == "bounded":
-                spread = f">= {low:.4g}" if high == math.inf else f"<= {high:.4g}"
+                spread = _range_text(low, high)
             else:
                 spread = "(start value kept)"
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
@@ -248,6 +248,17 @@ class FitResult:
         if self.confidence:
             lines.append(self.confidence)
         return "\n".join(lines)
+
+
+def _range_text(low: float, high: float) -> str:
+    """A bounded parameter's range as the summary shows it.
+
+    >>> _range_text(2.75, 2.862), _range_text(0.0, 9.5), _range_text(0.04, math.inf), _range_text(0.0, math.inf)
+    ('2.75 to 2.862', '<= 9.5', '>= 0.04', 'no range known')
+    """
+    if high == math.inf:
+        return f">= {low:.4g}" if low > 0 else "no range known"
+    return f"{low:.4g} to {high:.4g}" if low > 0 else f"<= {high:.4g}"
 
 
 #: A fit is rejected when its forward simulation misses the logs (RMS) by more than this many encoder
@@ -654,10 +665,10 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
 
-    status, uncertainty, confidence = confidence_of(status, uncertainty, forward_rms, setup.step)
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, allowed_scaled, scales)}
     status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
-    confidence = "; ".join(note for note in (confidence, regime_note) if note)
+    status, uncertainty, allowed, miss_note = confidence_of(status, uncertainty, allowed, forward_rms, setup.step)
+    confidence = "; ".join(note for note in (miss_note, regime_note) if note)
     if confidence:
         setup.progress(confidence)
     return FitResult(
@@ -789,8 +800,8 @@ def fit_parameters(
 
 
 def confidence_of(
-    status: Sequence[str], sigma: np.ndarray, forward_rms: float, step: float
-) -> tuple[tuple[str, ...], np.ndarray, str]:
+    status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]], forward_rms: float, step: float
+) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What may be claimed of the answer, given how well it replays the logs.
 
     Parameters
@@ -799,6 +810,8 @@ def confidence_of(
         The profile's status of each parameter (``"determined"``, ``"bounded"``, ``"not identified"``).
     sigma : ndarray
         The profile's standard uncertainties (any unit; ``inf`` where not determined).
+    allowed : dict
+        The range ``(low, high)`` over which the replay stays as good, per parameter name.
     forward_rms : float
         RMS position error of the forward simulation of the whole logs with the answer (m).
     step : float
@@ -806,34 +819,38 @@ def confidence_of(
 
     Returns
     -------
-    status, sigma, note
+    status, sigma, allowed, note
         Unchanged, with an empty note, when the replay is within :data:`CONFIDENT_STEPS` encoder steps.
-        Otherwise every "determined" becomes "bounded" with no uncertainty, and the note says why: a
-        profile around a point that misses the logs says nothing about where the logs' own answer lies.
+        Otherwise every "determined" becomes "bounded" with no uncertainty and no range is claimed (every
+        ``allowed`` becomes ``(0, inf)``), and the note says why: a profile around a point that misses the
+        logs says nothing about where the logs' own answer lies (on the unseen rig's triangle wave, missed
+        by 4.5 steps, it gave Beq 61.00 to 61.04 and F1 2.118 to 2.131; the rig's are 6.1 and 2.3).
 
     Examples
     --------
     >>> import numpy as np
-    >>> confidence_of(("determined", "bounded"), np.array([0.1, np.inf]), 30e-6, 22.75e-6)[0]
+    >>> confidence_of(("determined", "bounded"), np.array([0.1, np.inf]), {"F1": (1.9, 2.1), "v2": (0.04, np.inf)}, 30e-6, 22.75e-6)[0]
     ('determined', 'bounded')
-    >>> status, sigma, note = confidence_of(("determined", "bounded"), np.array([0.1, np.inf]), 100e-6, 22.75e-6)
-    >>> status, sigma.tolist()
-    (('bounded', 'bounded'), [inf, inf])
+    >>> status, sigma, allowed, note = confidence_of(
+    ...     ("determined", "bounded"), np.array([0.1, np.inf]), {"F1": (1.9, 2.1), "v2": (0.04, np.inf)}, 100e-6, 22.75e-6)
+    >>> status, sigma.tolist(), allowed
+    (('bounded', 'bounded'), [inf, inf], {'F1': (0.0, inf), 'v2': (0.0, inf)})
     >>> note.startswith("the answer misses the logs by 4.4 encoder steps")
     True
     """
     steps = forward_rms / max(step, 1e-6)
     if steps <= CONFIDENT_STEPS:
-        return tuple(status), np.asarray(sigma, dtype=float), ""
+        return tuple(status), np.asarray(sigma, dtype=float), dict(allowed), ""
     demoted = tuple(_polish.BOUNDED if s == _polish.DETERMINED else s for s in status)
     sigma = np.where([s == _polish.DETERMINED for s in status], math.inf, np.asarray(sigma, dtype=float))
+    unknown = {name: (0.0, math.inf) for name in allowed}
     note = (
         f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
         f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
-        f"an uncertainty; fit again from an earlier calibration of this rig (--calibration FILE --start defaults: the search "
+        f"an uncertainty or a range; fit again from an earlier calibration of this rig (--calibration FILE --start defaults: the search "
         f"already tried the lab's defaults and the logs' own estimate), or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
     )
-    return demoted, sigma, note
+    return demoted, sigma, unknown, note
 
 
 #: Beyond the slip region (the drag ``Beq`` alone) the cart must spend at least this share of its moving
@@ -874,8 +891,8 @@ def split_of_the_drag(
     of its moving samples beyond it (with both ``B`` and ``Beq`` fitted) shows only that sum, so both are reported
     bounded between 0 and the sum (in the returned ``allowed``); it sees the common scale of the drive, the forces
     and that drag, and ``v1``, only through the cart's inertia over the slip region's ~10 ms time constant, and
-    ``v2`` and ``F2`` only from below: every name of :data:`SLIP_ONLY_UNDETERMINED` is reported bounded, and a
-    note says why and what to record. Else unchanged.
+    ``v2`` and ``F2`` only from below: every name of :data:`SLIP_ONLY_UNDETERMINED` is reported bounded (``F1`` and
+    the force gain with no range, ``F2`` and ``v2`` from below), and a note says why and what to record. Else unchanged.
 
     Returns
     -------
@@ -892,6 +909,10 @@ def split_of_the_drag(
             status[j], sigma[j] = _polish.BOUNDED, math.inf
         if name in ("B", "Beq"):
             allowed[name] = (0.0, total)
+        elif name in ("F1", "force_gain"):  # the breakaway shows F1 / gain, the common scale only a transient: no range
+            allowed[name] = (0.0, math.inf)
+        elif name in ("F2", "v2"):  # from below only
+            allowed[name] = (allowed.get(name, (0.0, math.inf))[0], math.inf)
     note = (
         f"the cart moves beyond the slip region in only {beyond} of {moving} moving samples of the replay: the logs show "
         f"the drag B + Beq = {total:.3g} N*s/m there, not how it splits, and the force gain, the forces and v1 only through "
