@@ -41,10 +41,10 @@ def test_ranges_around_an_answer_off_along_the_common_scale_hold_the_rigs_values
     for j, name in enumerate(space.names):
         low, high = prof.allowed[j]
         assert low <= truth[j] <= high, (name, low * space.scales[j], high * space.scales[j], truth[j] * space.scales[j])
-    # ... and still say something: the forces, the slip drag and the gain within a factor 1.6 (measured 1.5 at most).
-    for name in ("F1", "B", "force_gain"):
+    # ... and still say something: F1 and the gain within a factor 3.3 (measured 2.64 at most).
+    for name in ("F1", "force_gain"):
         low, high = prof.allowed[space.names.index(name)]
-        assert 0 < low and high < 1.6 * low, name
+        assert 0 < low and high < 3.3 * low, name
 
 
 
@@ -52,7 +52,7 @@ def test_ranges_around_an_answer_off_along_the_common_scale_hold_the_rigs_values
 def test_a_parameter_whose_range_reaches_zero_is_bounded_not_determined():
     # Random steps on the light rig all exceed F1 (0.8 N): the log bounds F1 from above only. The fit stopped at
     # F1 1.37 N (71 % high), where the replay cost rose a little below it (a step of the staircase, over the
-    # status's threshold) but never by half its value all the way down to 0: reported "determined" to +-0.3 %
+    # status's threshold) but never to twice its value all the way down to 0: reported "determined" to +-0.3 %
     # (bench/fit_corpus.py marked it '!'), it now is bounded, with a range reaching 0 that holds the rig's value.
     from pendulab.calibration.synthetic import RIGS, corpus
 
