@@ -41,6 +41,10 @@ def test_a_rig_whose_slip_region_covers_the_motion_shows_only_the_sum(shape):
     assert new_allowed["F1"] == new_allowed["force_gain"] == (0.0, math.inf)
     assert new_allowed["F2"] == (3.1, math.inf) and new_allowed["v2"] == (0.05, math.inf) and new_allowed["v1"] == (0.002, 0.005)
     assert allowed["F1"] == (2.11, 2.13)  # the caller's ranges are not changed in place
+    # The sum is seen against the drive: where the gain may be 20 % higher, so may the sum (the held-out slow ramps
+    # with 10 mV: the common scale 13 % low, B's range up to the fitted sum excluded the rig's B).
+    wider = split_of_the_drag(NAMES, status, sigma, {**allowed, "force_gain": (0.7, 1.2 * p.force_gain)}, p, [(inside, beyond)])[2]
+    assert wider["B"] == wider["Beq"] == (0.0, 1.2 * (p.B + p.Beq))
     assert new_status == ("bounded",) * len(NAMES) and np.all(np.isinf(new_sigma))
     assert "B + Beq" in note and "faster motion" in note
 

@@ -926,7 +926,8 @@ def split_of_the_drag(
 
     Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE`
     of its moving samples beyond it (with both ``B`` and ``Beq`` fitted) shows only that sum, so both are reported
-    bounded between 0 and the sum (in the returned ``allowed``); it sees the common scale of the drive, the forces
+    bounded between 0 and the sum, times the common scale's largest factor the ranges allow (in the returned
+    ``allowed``); it sees the common scale of the drive, the forces
     and that drag, and ``v1``, only through the cart's inertia over the slip region's ~10 ms time constant, and
     ``v2`` and ``F2`` only from below: every name of :data:`SLIP_ONLY_UNDETERMINED` is reported bounded (``F1`` and
     the force gain with no range, ``F2`` and ``v2`` from below), and a note says why and what to record. Else unchanged.
@@ -941,11 +942,13 @@ def split_of_the_drag(
         return tuple(status), sigma, dict(allowed), ""
     status, sigma, allowed = list(status), np.asarray(sigma, dtype=float).copy(), dict(allowed)
     total = params.B + params.Beq
+    # The sum is seen against the drive: it is as uncertain as the common scale (the gain's range along it).
+    scale_high = max(1.0, allowed.get("force_gain", (0.0, 1.0))[1] / params.force_gain) if "force_gain" in names else 1.0
     for j, name in enumerate(names):
         if name in SLIP_ONLY_UNDETERMINED and status[j] == _polish.DETERMINED:
             status[j], sigma[j] = _polish.BOUNDED, math.inf
         if name in ("B", "Beq"):
-            allowed[name] = (0.0, total)
+            allowed[name] = (0.0, total * scale_high)
         elif name in ("F1", "force_gain"):  # the breakaway shows F1 / gain, the common scale only a transient: no range
             allowed[name] = (0.0, math.inf)
         elif name in ("F2", "v2"):  # from below only
