@@ -20,7 +20,7 @@ def test_the_global_search_finds_the_rigs_basin_where_the_local_stages_fold_B_in
     said: list[str] = []
     result = fit_parameters([case.log()], PlantParameters.preset("none"), on_progress=said.append)
     before = [s for s in said if s.startswith("polished on the replay")]
-    assert before and any(s.startswith("the global search and the polish") for s in said), said
+    assert before and any(s.startswith("the global search, and the polish") for s in said), said
     true = case.params
     steps = result.forward_rms / result.encoder_step
     # Measured: 0.72 steps; Beq -2.0 %, force gain -0.1 %, F1 -0.3 %, B +0.05 %.

@@ -28,7 +28,7 @@ robust 1-D scans along what slow logs confuse (the common scale of the gain, the
 the split of the drag between ``B`` and ``Beq``; the corner ``F2, v2``), walks along that corner; where the
 answer still misses by more than :data:`EVOLVE_ABOVE_STEPS` encoder steps an evolution strategy around it
 (CMA-ES), and where it then misses by more than :data:`GLOBAL_ABOVE_STEPS` (the cart alone) the global search:
-CMA-ES on the replay from the start, a factor e either way (:func:`_globally`). A noisy logged voltage is replayed
+CMA-ES on the replay from the start, a factor e either way (:func:`_evolved`). A noisy logged voltage is replayed
 denoised where that replays the motion better.
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
@@ -315,7 +315,7 @@ EVOLVE_ABOVE_STEPS = 1.5
 EVOLVE_SEEDS = (19, 20)
 #: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
 POLISH_WORK = 1.4e7
-#: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the global search (:func:`_globally`):
+#: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the global search (:func:`_evolved`):
 #: CMA-ES on the replay from the start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each
 #: seed while it still misses. On the unseen rig's triangle wave, stopped at 4.5 steps with B folded into Beq, 3 of 8
 #: seeds found the rig's basin (a cost 0.3-0.5 times the true values'), the others none better; about 9 CPU-s each.
@@ -592,48 +592,32 @@ def _replay_rms(setup: _Setup, replays: list[_polish.Anchors], theta: np.ndarray
     return float(np.sqrt(np.mean(np.nan_to_num(errors, nan=1e6) ** 2))) * float(np.mean([a.sigma[0] for a in replays]))
 
 
-def _evolved(setup: _Setup, answer: _Answer) -> _Answer:
+def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
     """Stage 2, last: where the chosen answer still misses by more than :data:`EVOLVE_ABOVE_STEPS`, the evolution
     strategy around it (:func:`_polish.evolve`: joint moves that no fixed direction makes), and the polish;
-    with the next of :data:`EVOLVE_SEEDS` while it still misses."""
+    with the next of :data:`EVOLVE_SEEDS` while it still misses. ``globally``: the global search instead, where it
+    misses by more than :data:`GLOBAL_ABOVE_STEPS`, from the start and a factor e either way, with :data:`GLOBAL_SEEDS`;
+    not with the pendulum (its replay costs several times the cart's; on the sticky rig's closed loop, at 3.35
+    steps, three seeds took 85 CPU-s and found nothing the bar accepts)."""
     searched, space, result = answer.searched, setup.space, answer.polished
-    if answer.rms <= EVOLVE_ABOVE_STEPS * setup.step:
+    above, seeds = (GLOBAL_ABOVE_STEPS, GLOBAL_SEEDS) if globally else (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS)
+    if answer.rms <= above * setup.step or (globally and setup.with_pendulum):
         return answer
-    for seed in EVOLVE_SEEDS:
-        if result.cost <= _cost_of(setup, searched, EVOLVE_ABOVE_STEPS):
+    for seed in seeds:
+        if result.cost <= _cost_of(setup, searched, above):
             break
-        theta, cost = _polish.evolve(searched, space, result.theta, result.cost, seed)
-        if cost < (1 - WALK_GAIN) * result.cost:
-            result = result.then(_polish.polish(searched, space, theta, max_iter=setup.polish_iter, scan=()), replays=_polish.EVOLVE_GENERATIONS)
-    if result is answer.polished:
-        return answer
-    rms = _replay_rms(setup, answer.replays, result.theta)
-    setup.progress(f"the evolution strategy around the answer, and the polish: cost {answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
-    return _Answer(answer.candidate, result, searched, answer.replays, rms)
-
-
-def _globally(setup: _Setup, answer: _Answer) -> _Answer:
-    """Stage 2, last, where the answer still misses by more than :data:`GLOBAL_ABOVE_STEPS` (the cart alone): the
-    global search, CMA-ES on the replay from the start with a step of a factor e either way (log units), with each
-    of :data:`GLOBAL_SEEDS` while it still misses; the best point it finds is polished and kept if it replays better.
-
-    Not with the pendulum: its replay costs several times the cart's, and on the sticky rig's closed loop (3.35
-    steps) three seeds took 85 CPU-s and found nothing the bar accepts."""
-    searched, space, result = answer.searched, setup.space, answer.polished
-    if answer.rms <= GLOBAL_ABOVE_STEPS * setup.step or setup.with_pendulum:
-        return answer
-    for seed in GLOBAL_SEEDS:
-        if result.cost <= _cost_of(setup, searched, GLOBAL_ABOVE_STEPS):
-            break
-        theta, cost = _polish.evolve(searched, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS)
-        setup.progress(f"the global search (seed {seed}): cost {cost:.4g} against the answer's {result.cost:.4g}")
-        if cost < result.cost:
+        if globally:
+            theta, cost = _polish.evolve(searched, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS)
+        else:
+            theta, cost = _polish.evolve(searched, space, result.theta, result.cost, seed)
+        if cost < (1.0 if globally else 1 - WALK_GAIN) * result.cost:
             found = _polish.polish(searched, space, theta, max_iter=setup.polish_iter, scan=())
-            result = result.then(found, replays=GLOBAL_GENERATIONS)
+            result = result.then(found, replays=GLOBAL_GENERATIONS if globally else _polish.EVOLVE_GENERATIONS)
     if result is answer.polished:
         return answer
     rms = _replay_rms(setup, answer.replays, result.theta)
-    setup.progress(f"the global search and the polish: cost {answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
+    setup.progress(f"{'the global search' if globally else 'the evolution strategy around the answer'}, and the polish: cost "
+                   f"{answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
     return _Answer(answer.candidate, result, searched, answer.replays, rms)
 
 
@@ -833,7 +817,7 @@ def fit_parameters(
 
         progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")
     best = _polished(setup, _observer_search(setup, start_from_logs))
-    return _result(setup, _globally(setup, _evolved(setup, best)), start_values, t_start)
+    return _result(setup, _evolved(setup, _evolved(setup, best), globally=True), start_values, t_start)
 
 
 def confidence_of(
