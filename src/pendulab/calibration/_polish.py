@@ -613,9 +613,10 @@ EVOLVE_POPULATION = 16
 
 
 def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, seed: int = 19, sigma: float = EVOLVE_SIGMA,
-           generations: int = EVOLVE_GENERATIONS) -> tuple[np.ndarray, float]:
+           generations: int = EVOLVE_GENERATIONS, give_up: tuple[int, float] | None = None) -> tuple[np.ndarray, float]:
     """CMA-ES (:mod:`cma`) on the replay cost around ``theta`` (of cost ``cost``), in log coordinates, its first step
-    ``sigma``, for at most ``generations`` of :data:`EVOLVE_POPULATION`.
+    ``sigma``, for at most ``generations`` of :data:`EVOLVE_POPULATION`; ``give_up=(g, c)`` stops it after ``g``
+    generations if it has found no cost below ``c`` by then.
 
     Derivative-free and with a population per step, it steps over the replay cost's small jumps, and it
     learns the joint moves that the pattern search's fixed directions miss (see fit.EVOLVE_ABOVE_STEPS); with a
@@ -633,6 +634,8 @@ def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, se
         while not es.stop():
             U = np.round(np.array(es.ask()), 9)
             es.tell(list(U), list(costs(logs, space, np.array([space.project(np.exp(u)) for u in U]))))
+            if give_up and es.countiter >= give_up[0] and es.result.fbest >= give_up[1]:
+                break
         best, best_cost = space.project(np.exp(np.asarray(es.result.xbest))), float(es.result.fbest)
     finally:
         np.random.set_state(state)

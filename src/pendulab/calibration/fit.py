@@ -319,6 +319,7 @@ POLISH_WORK = 1.4e7
 #: CMA-ES on the replay from the start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each
 #: seed while it still misses. On the unseen rig's triangle wave, stopped at 4.5 steps with B folded into Beq, 3 of 8
 #: seeds found the rig's basin (a cost 0.3-0.5 times the true values'), the others none better; about 9 CPU-s each.
+#: A seed still above the answer's cost halfway gives up (the three that found it were below by generation 46-72).
 GLOBAL_ABOVE_STEPS = 2.0
 GLOBAL_SEEDS = (1, 2, 3)
 GLOBAL_SIGMA = 1.0
@@ -607,7 +608,8 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
         if result.cost <= _cost_of(setup, searched, above):
             break
         if globally:
-            theta, cost = _polish.evolve(searched, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS)
+            theta, cost = _polish.evolve(searched, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS,
+                                         give_up=(GLOBAL_GENERATIONS // 2, result.cost))
         else:
             theta, cost = _polish.evolve(searched, space, result.theta, result.cost, seed)
         if cost < (1.0 if globally else 1 - WALK_GAIN) * result.cost:
