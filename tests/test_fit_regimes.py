@@ -47,6 +47,8 @@ def test_a_rig_whose_slip_region_covers_the_motion_shows_only_the_sum(shape):
     assert wider["B"] == wider["Beq"] == (0.0, 1.2 * (p.B + p.Beq))
     assert new_status == ("bounded",) * len(NAMES) and np.all(np.isinf(new_sigma))
     assert "B + Beq" in note and "faster motion" in note
+    # The speed to outrun is v2's lower bound, not the fitted value (which such a log does not pin).
+    assert "outrun v2, above 0.05 m/s by these logs" in note and f"{p.v2:.3g} m/s" not in note
 
 
 @pytest.mark.parametrize("shape, rig", [("chirp", "unseen"), ("random steps", "unseen"), ("ramps with holds", "sticky")])
