@@ -12,23 +12,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fit_helpers import prepared, scaled
 
 from pendulab.calibration import _polish  # private: the fit's profile is what these tests check
-from pendulab.calibration.fit import _LOWER, _UPPER, DEFAULT_FIT, _initial_states, _noise_level  # private: the fit's space
 from pendulab.calibration.synthetic import TRUE, synthetic_log
-from pendulab.model.parameters import PlantParameters
 
 
 @pytest.fixture(scope="module")
 def slow_ramps():
-    log = synthetic_log("ramps with holds", TRUE, duration=12.0)
-    used = ((len(log) - 1) // 10) * 10 + 1
-    sigma = np.array([_noise_level(log.x[:used])])
-    anchors = [_polish.anchors(log, used, _initial_states(log, False)[:used:10].T, 10, sigma, TRUE.q_x, False)]
-    lab = PlantParameters.preset("none")
-    scales = np.array([getattr(lab, n) for n in DEFAULT_FIT])
-    space = _polish.Space(lab, DEFAULT_FIT, scales, np.array([_LOWER[n] for n in DEFAULT_FIT]) / scales, np.array([_UPPER[n] for n in DEFAULT_FIT]) / scales)
-    return anchors, space, np.array([getattr(TRUE, n) for n in DEFAULT_FIT]) / scales
+    anchors, space = prepared(synthetic_log("ramps with holds", TRUE, duration=12.0), TRUE.q_x)
+    return anchors, space, scaled(TRUE, space)
 
 
 @pytest.mark.parametrize("scale", [-0.02, -0.04])
@@ -58,16 +51,11 @@ def test_a_parameter_whose_range_reaches_zero_is_bounded_not_determined():
 
     rig = RIGS["light drag, strong drive"]
     log = next(c for c in corpus() if c.name == "random steps | light drag, strong drive | 10 mV").log()
-    used = ((len(log) - 1) // 10) * 10 + 1
-    sigma = np.array([_noise_level(log.x[:used])])
-    anchors = [_polish.anchors(log, used, _initial_states(log, False)[:used:10].T, 10, sigma, rig.q_x, False)]
-    lab = PlantParameters.preset("none")
-    scales = np.array([getattr(lab, n) for n in DEFAULT_FIT])
-    space = _polish.Space(lab, DEFAULT_FIT, scales, np.array([_LOWER[n] for n in DEFAULT_FIT]) / scales, np.array([_UPPER[n] for n in DEFAULT_FIT]) / scales)
+    anchors, space = prepared(log, rig.q_x)
     # The fit's answer there, to the last bit (F1, v1, F2, v2, B, Beq, force_gain).
     found = [1.3671829638219535, 0.00727564885060917, 1.702410890408152, 0.039163622210706676, 15.878221089431623, 3.0021003239780444, 1.2010213526512992]
-    prof = _polish.profile(anchors, space, np.array(found) / scales)
+    prof = _polish.profile(anchors, space, np.array(found) / space.scales)
     j = space.names.index("F1")
     low, high = prof.allowed[j]
-    assert prof.status[j] == _polish.BOUNDED and low == 0.0 and rig.F1 / scales[j] < high
+    assert prof.status[j] == _polish.BOUNDED and low == 0.0 and rig.F1 / space.scales[j] < high
     assert prof.status[space.names.index("Beq")] == _polish.DETERMINED  # what the steps do show stays determined

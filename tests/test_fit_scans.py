@@ -12,11 +12,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from fit_helpers import prepared
 
 from pendulab.calibration import _polish  # private: the fit's scans and profile are what these tests check
-from pendulab.calibration.fit import _LOWER, _UPPER, DEFAULT_FIT, _initial_states, _noise_level  # private: the fit's space
+from pendulab.calibration.fit import DEFAULT_FIT
 from pendulab.calibration.synthetic import RIGS, synthetic_log
-from pendulab.model.parameters import PlantParameters
 
 TRUE = RIGS["unseen"]
 #: Where a search settled on the 6 s log below: B folded into Beq, the slip region gone (v2 at its bound).
@@ -24,13 +24,7 @@ TRAP = {"F1": 2.618, "v1": 3.179e-4, "F2": 7.188, "v2": 0.001, "B": 0.06545, "Be
 
 
 def setup():
-    log = synthetic_log("ramps with holds", TRUE, duration=6.0, voltage_noise=0.0)
-    used = ((len(log) - 1) // 10) * 10 + 1
-    anchors = [_polish.anchors(log, used, _initial_states(log, False)[:used:10].T, 10, np.array([_noise_level(log.x[:used])]), TRUE.q_x, False)]
-    lab = PlantParameters.preset("none")
-    scales = np.array([getattr(lab, n) for n in DEFAULT_FIT])
-    space = _polish.Space(lab, DEFAULT_FIT, scales, np.array([_LOWER[n] for n in DEFAULT_FIT]) / scales, np.array([_UPPER[n] for n in DEFAULT_FIT]) / scales)
-    return anchors, space
+    return prepared(synthetic_log("ramps with holds", TRUE, duration=6.0, voltage_noise=0.0), TRUE.q_x)
 
 
 def steps(anchors, space, theta) -> float:

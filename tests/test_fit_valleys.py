@@ -12,25 +12,17 @@ import math
 
 import numpy as np
 import pytest
+from fit_helpers import prepared, scaled
 
 from pendulab.calibration import _polish  # private: the fit's valleys and profile are what these tests check
-from pendulab.calibration.fit import _LOWER, _UPPER, DEFAULT_FIT, _initial_states, _noise_level  # private: the fit's space
 from pendulab.calibration.synthetic import TRUE, calibrate_ramp_log
-from pendulab.model.parameters import PlantParameters
 
 
 @pytest.fixture(scope="module")
 def ramp():
     """The calibrate ramp test on the unseen rig, prepared for replays as the fit does it, and the fit's space."""
-    log = calibrate_ramp_log(TRUE)
-    used = ((len(log) - 1) // 10) * 10 + 1
-    sigma = np.array([_noise_level(log.x[:used])])
-    anchors = [_polish.anchors(log, used, _initial_states(log, False)[:used:10].T, 10, sigma, TRUE.q_x, False)]
-    lab = PlantParameters.preset("none")
-    scales = np.array([getattr(lab, n) for n in DEFAULT_FIT])
-    space = _polish.Space(lab, DEFAULT_FIT, scales, np.array([_LOWER[n] for n in DEFAULT_FIT]) / scales, np.array([_UPPER[n] for n in DEFAULT_FIT]) / scales)
-    truth = np.array([getattr(TRUE, n) for n in DEFAULT_FIT]) / scales
-    return anchors, space, truth
+    anchors, space = prepared(calibrate_ramp_log(TRUE), TRUE.q_x)
+    return anchors, space, scaled(TRUE, space)
 
 
 def cost(anchors, space, theta) -> float:
