@@ -1,5 +1,5 @@
-"""A representative part of bench/fit_corpus.py (issue 19), run as the bench runs it: two shapes (slow ramps with
-holds, the closed loop), two rigs, with and without voltage noise, about 2.2 minutes of CPU in all (random steps and
+"""A representative part of bench/fit_corpus.py (issue 19), run as the bench runs it: three shapes (slow ramps with
+holds, the closed loop, a triangle wave), two rigs, with and without voltage noise, about 2.8 minutes of CPU in all (random steps and
 the chirp of the unseen rig are test_fit_shapes.py's, the calibrate ramp test test_fit.py's and
 test_calibration_cli.py's). The whole corpus, with its table, is ``python bench/fit_corpus.py``; its held-out third
 is not used here.
@@ -22,12 +22,17 @@ BENCH = Path(__file__).resolve().parent.parent / "bench" / "fit_corpus.py"
 
 #: The cases, and whether the issue's whole bar is asserted on them (measured here: see the note at each). The largest
 #: z (error / reported sigma) of a determined parameter was 0.51 (F2 of the closed loop); over the development corpus's
-#: cases that meet the bar, 1.40 (B of the unseen rig's chirp); on the triangle of the heavy-drag rig with 10 mV (not
-#: here) B's was 2.77, too close to 3 for a test.
+#: cases that meet the bar, 1.40 (B of the unseen rig's chirp).
 CASES = {
     "closed loop | unseen | 0 mV": True,  # replay 0.53 steps, errors <= 0.3 %, all but v1 determined
     "ramps with holds | heavy drag, weak drive | 10 mV": True,  # replay 1.58 steps, errors <= 0.2 % but v1 +3.2 %
+    # Replay 1.53 steps (the rig's own values: 2.57): the common scale 3.5 % low. The z of F1, F2, Beq and the gain
+    # were 3.9 to 4.5 before their uncertainty held how the scale moves with the other estimate of the voltage
+    # (fit._voltage_shift); now 1.23 to 1.46, B 0.85.
+    "triangle | heavy drag, weak drive | 10 mV": False,
 }
+#: Determined parameters whose z is not asserted: measured too close to 3 for a test (within 25 %).
+Z_UNTESTED = {"triangle | heavy drag, weak drive | 10 mV": {"v2"}}  # v2 +0.8 %, z 2.51
 
 
 def _load_bench():
@@ -51,7 +56,7 @@ def test_corpus_case_is_accepted_and_honest(name):
     print("\n" + bench.line(row))
     assert row["accepted"], row.get("refused", row)
     for parameter, status in row["status"].items():
-        if status == "determined":
+        if status == "determined" and parameter not in Z_UNTESTED.get(name, ()):
             assert row["z"][parameter] <= 3.0, (parameter, row["errors"][parameter], row["z"][parameter])
     # A bounded parameter's range holds the rig's value (bench/fit_corpus.py's '?': 1 in the 32 development cases,
     # where the rig's own values replay 5 times worse than the answer).
