@@ -207,7 +207,8 @@ class FitResult:
             **({"determination_note": self.confidence} if self.confidence else {}),
             "allowed_range": {n: [finite(a), finite(b)] for n, (a, b) in self.allowed.items()},
             "kept_start_value": [n for n, s in self.determination.items() if s == "not identified"],
-            "method": "least-squares fit on an observer of the replay (Levenberg-Marquardt on one-sample prediction errors), polished on the replay under the true law",
+            "method": "least-squares fit on an observer of the replay (Levenberg-Marquardt on one-sample prediction errors), polished on the replay "
+                      "under the true law (scans, a pattern search, CMA-ES around the answer and, where it still missed, from the start)",
             "uncertainty_method": self.uncertainty_method,
             "forward_simulation_restarts": self.restarts,
             "forward_simulation_voltage": "denoised (the logged voltage is noisy)" if self.voltage_filtered else "as logged",
