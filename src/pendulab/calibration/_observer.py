@@ -10,7 +10,7 @@ narrower one (nearer the replay); then the polish (:func:`pendulab.calibration._
 
 The search is Levenberg-Marquardt in the logarithms of the scaled parameters, with the Jacobian by
 central differences (one batched observer run for all of them, and one for a ladder of damping
-factors), from several starts (the given values, the lab's defaults, the logs' own estimate): each
+factors), from several starts (the given values, the logs' own estimate): each
 start a few iterations, then the best one to convergence.
 """
 
@@ -50,7 +50,6 @@ class Observed:
     cost: float
     iterations: int
     runs: int
-    others: tuple[np.ndarray, ...] = ()  # the other starts' answers (the fit chooses among them on a narrower observer)
 
 
 def observer_gain(omega: float, period: float, zeta: float = ZETA, outputs: int = 1) -> np.ndarray:
@@ -133,7 +132,7 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
     omega = OMEGAS[-1]
     scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: costs(logs, space, thetas, omega))
     best = _levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
-    return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs, tuple(o.theta for o in tried))
+    return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs)
 
 
 def costs(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:

@@ -13,8 +13,8 @@ check replays the whole logs with it.
 
 *Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the
 one-sample prediction errors of an observer of the replay (the replay itself is a needle as an
-objective), from the start, the lab's defaults and (the cart alone) the logs' own estimate; an
-observer of narrow bandwidth (:data:`CHOICE_OMEGA`) chooses among their answers. Long logs are
+objective), from the start and (the cart alone) the logs' own estimate; the polish goes on from its
+answer. Long logs are
 searched on at most :data:`STAGE_SECONDS` of them (:data:`PIECE_SECONDS` windows where the cart stops
 and starts most). An upright pendulum's replay restarts from the observer's state estimates, each
 settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`).
@@ -29,7 +29,7 @@ the split of the drag between ``B`` and ``Beq``; the corner ``F2, v2``), walks a
 answer still misses by more than :data:`EVOLVE_ABOVE_STEPS` encoder steps an evolution strategy around it
 (CMA-ES), and where it then misses by more than :data:`GLOBAL_ABOVE_STEPS` (the cart alone) the global search:
 CMA-ES on the replay from the start, a factor e either way (:func:`_evolved`). A noisy logged voltage is replayed
-denoised where that replays the motion better (and the uncertainties hold how the answer moves with the other
+denoised (and the uncertainties hold how the answer moves with the other
 estimate, :func:`_voltage_shift`).
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
@@ -273,8 +273,6 @@ FORWARD_LIMIT_STEPS = 20.0
 #: called Beq determined to a few per cent; fits that found the log's own answer replay within 0.9 to 2.5.
 CONFIDENT_STEPS = 3.0
 
-#: The bandwidth (rad/s) of the observer that chooses among the observer search's answers from its starts.
-CHOICE_OMEGA = 20.0
 
 def _noise_level(x: np.ndarray) -> float:
     """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
@@ -417,7 +415,6 @@ class _Setup:
     names: tuple[str, ...]
     scales: np.ndarray  # theta = value / scale
     theta0: np.ndarray  # the start, scaled
-    theta_default: np.ndarray  # the lab's defaults, scaled
     space: _polish.Space
     interval: float  # between the state estimates (s)
     pieces: list[tuple[RampLog, int, int]]  # what the searches see of long logs (:func:`_pieces`)
@@ -438,7 +435,7 @@ class _Setup:
     @property
     def denoise(self) -> bool:
         """Whether the logged voltage carries sample noise the motor never saw (a measured, not a commanded,
-        voltage; the cart alone): then the search follows its denoised twin, the polish tries both, a force
+        voltage; the cart alone): then the search and the polish replay its denoised twin, a force
         threshold is no better known than that noise's drive, and the common scale no better than the two
         estimates of the voltage agree (:func:`_voltage_shift`)."""
         return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
@@ -465,7 +462,6 @@ class _Candidate:
     rms: float  # the search's one-sample prediction RMS (m)
     whole: list[_LogEstimate]
     replays: list[_polish.Anchors]  # the whole logs' restarts for the replay
-    others: tuple[np.ndarray, ...] = ()  # the observer search's other starts' answers
 
 
 @dataclass
@@ -491,8 +487,8 @@ def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEs
 
 
 def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
-    """Stage 1: the observer search (:mod:`pendulab.calibration._observer`) from the start, the lab's defaults
-    and (the cart alone) the logs' own estimate; the replay's polish goes on from its answer."""
+    """Stage 1: the observer search (:mod:`pendulab.calibration._observer`) from the start and (the cart alone)
+    the logs' own estimate; the replay's polish goes on from its answer."""
     names, space, theta0, with_pendulum = setup.names, setup.space, setup.theta0, setup.with_pendulum
     whole = []
     for log in setup.logs:
@@ -504,8 +500,6 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
     if setup.denoise:
         searched = [_polish.denoised(a) for a in searched]  # the observer follows the drive the motor got
     starts = [theta0]
-    if np.max(np.abs(setup.theta_default / theta0 - 1)) > 0.05:
-        starts.append(setup.theta_default)
     if start_from_logs and not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
         from pendulab.calibration._start import log_start
 
@@ -532,7 +526,7 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
             e.estimates[:, : every.shape[0]] = every.T
             restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
             replays[j] = _polish.settled(restarted, vector[0], names)
-    return _Candidate(found.theta, found.iterations, rms_observed, whole, replays, others=found.others)
+    return _Candidate(found.theta, found.iterations, rms_observed, whole, replays)
 
 
 def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
@@ -541,20 +535,10 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     replays = candidate.replays
     # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
     searched = _pieces_of(setup, replays, candidate.whole)
-    # The polish starts from the search's answer, another start's or the start, as an observer of narrow
-    # bandwidth (CHOICE_OMEGA) chooses: it sees a slow log's common scale as the replay does, without its needle.
-    starts = np.array([candidate.theta, *candidate.others, space.project(setup.theta0.copy())])
-    which = 0
-    if setup.denoise:
-        # The denoised twin is tried too (see _Setup.denoise), and the better of the two is searched.
-        voltages = [searched, [_polish.denoised(a) for a in searched]]
-        which = int(np.argmin([float(np.min(_polish.costs(v, space, starts))) for v in voltages]))
-        searched = voltages[which]
-    first = starts[int(np.argmin(_observer.costs(searched, space, starts, CHOICE_OMEGA)))]
-    if which:
-        replays = [_polish.denoised(a) for a in replays]
+    if setup.denoise:  # the drive the motor got (see _Setup.denoise), as the observer search saw it
+        searched, replays = [_polish.denoised(a) for a in searched], [_polish.denoised(a) for a in replays]
     polish_iter, work = setup.polish_iter, setup.polish_work
-    result = _polish.polish(searched, space, first, max_iter=polish_iter, work=work)
+    result = _polish.polish(searched, space, candidate.theta, max_iter=polish_iter, work=work)
     target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
     def walked(result: _polish.Polished) -> _polish.Polished:
         """:func:`_polish.walk` along the slip region's corner, and the polish from where it ends."""
@@ -833,13 +817,11 @@ def fit_parameters(
     start_values = np.array([getattr(params0, n) for n in names])
     scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start_values)])
     theta0 = start_values / scales
-    defaults = PlantParameters.preset("none" if params0.Mp == 0 else "long")
     lower = np.array([_LOWER[n] for n in names]) / scales
     upper = np.array([_UPPER[n] for n in names]) / scales
     prior = (theta0, regularization) if regularization > 0 else None
     setup = _Setup(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
-        theta_default=np.array([getattr(defaults, n) for n in names]) / scales,
         space=_polish.Space(params0, names, scales, lower, upper, prior), interval=interval,
         pieces=_pieces(logs, stride), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
         polish_iter=polish_iter, polish_work=polish_work,
@@ -903,7 +885,7 @@ def confidence_of(
         f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
         f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
         f"an uncertainty or a range; fit again from an earlier calibration of this rig (--calibration FILE --start defaults: the search "
-        f"already tried the lab's defaults and the logs' own estimate), or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
+        f"already tried the given start, the logs' own estimate and a global search from the start), or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
     )
     return demoted, sigma, unknown, note
 
@@ -1008,7 +990,7 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
     if not vectors:
         return params0, (
             "no ramp test to extract the friction from in the logs (fine: any motion will do); starting from the given "
-            "parameters, the lab's defaults and an estimate made from the logs themselves"
+            "parameters and an estimate made from the logs themselves"
         )
     values = {n: float(np.mean([v[n] for v in vectors if n in v])) for n in FRICTION_NAMES if any(n in v for v in vectors)}
     merged = {**dict(zip(FRICTION_NAMES, params0.friction)), **values}
