@@ -616,18 +616,17 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
 
 def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
     """How far (log units) the best common scale of the gain, forces and drags moves from ``theta`` when the other
-    estimate of the applied voltage (the logged one, or its denoised twin) is replayed instead of the answer's.
+    estimate of the applied voltage, the logged one, is replayed instead of the answer's denoised one.
 
     The motor saw neither: the gap is a floor of those parameters' uncertainty. On the heavy rig's triangle wave with
     10 mV the answer's scale was 3.5 % low and reported to +-0.8 %; the logged voltage's best scale lies 2 % higher.
     Two batched scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours).
     """
-    searched = answer.searched
-    other = _pieces_of(setup, answer.candidate.replays, answer.candidate.whole) if searched[0].denoised else [_polish.denoised(a) for a in searched]
+    logged = _pieces_of(setup, answer.candidate.replays, answer.candidate.whole)  # the observer's anchors: not denoised
     centre, span = 0.0, 0.1
     for _ in range(2):
         X = centre + np.linspace(-span, span, SCAN_POINTS)
-        c = _polish.costs(other, setup.space, np.array([_polish.moved(setup.space, theta, "scale", x) for x in X]))
+        c = _polish.costs(logged, setup.space, np.array([_polish.moved(setup.space, theta, "scale", x) for x in X]))
         centre, span = float(X[int(np.argmin(c))]), 2 * span / (SCAN_POINTS - 1)
     return abs(centre)
 
