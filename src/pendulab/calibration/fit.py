@@ -461,7 +461,8 @@ class _Candidate:
     iterations: int  # of the observer search
     rms: float  # the search's one-sample prediction RMS (m)
     whole: list[_LogEstimate]
-    replays: list[_polish.Anchors]  # the whole logs' restarts for the replay
+    replays: list[_polish.Anchors]  # the whole logs' restarts for the replay (the voltage denoised if it is noisy)
+    logged: list[_polish.Anchors]  # the same with the logged voltage
 
 
 @dataclass
@@ -495,10 +496,10 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
         M, used = setup.stride(log), setup.used(log)
         sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
         whole.append(_LogEstimate(log, used, M, _initial_states(log, with_pendulum)[:used:M].T.copy(), np.full(used, np.nan), sigma))
-    replays = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
+    logged = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
+    # A noisy logged voltage: the search, the polish and the check replay the drive the motor got (_Setup.denoise).
+    replays = [_polish.denoised(a) for a in logged] if setup.denoise else list(logged)
     searched = _pieces_of(setup, replays, whole)
-    if setup.denoise:
-        searched = [_polish.denoised(a) for a in searched]  # the observer follows the drive the motor got
     starts = [theta0]
     if start_from_logs and not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
         from pendulab.calibration._start import log_start
@@ -526,7 +527,7 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
             e.estimates[:, : every.shape[0]] = every.T
             restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
             replays[j] = _polish.settled(restarted, vector[0], names)
-    return _Candidate(found.theta, found.iterations, rms_observed, whole, replays)
+    return _Candidate(found.theta, found.iterations, rms_observed, whole, replays, logged)
 
 
 def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
@@ -535,8 +536,6 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     replays = candidate.replays
     # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
     searched = _pieces_of(setup, replays, candidate.whole)
-    if setup.denoise:  # the drive the motor got (see _Setup.denoise), as the observer search saw it
-        searched, replays = [_polish.denoised(a) for a in searched], [_polish.denoised(a) for a in replays]
     polish_iter, work = setup.polish_iter, setup.polish_work
     result = _polish.polish(searched, space, candidate.theta, max_iter=polish_iter, work=work)
     target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
@@ -622,7 +621,7 @@ def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
     10 mV the answer's scale was 3.5 % low and reported to +-0.8 %; the logged voltage's best scale lies 2 % higher.
     Two batched scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours).
     """
-    logged = _pieces_of(setup, answer.candidate.replays, answer.candidate.whole)  # the observer's anchors: not denoised
+    logged = _pieces_of(setup, answer.candidate.logged, answer.candidate.whole)
     centre, span = 0.0, 0.1
     for _ in range(2):
         X = centre + np.linspace(-span, span, SCAN_POINTS)
