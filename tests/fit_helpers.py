@@ -8,6 +8,15 @@ from pendulab.calibration import _polish  # private: the fit's replay objective 
 from pendulab.calibration.fit import _LOWER, _UPPER, DEFAULT_FIT, _initial_states, _noise_level  # private: the fit's space
 from pendulab.calibration.logs import RampLog
 from pendulab.model.parameters import PlantParameters
+from pendulab.model.plant import PlantModel
+
+
+def simulate(params: PlantParameters | np.ndarray, V: np.ndarray, step: float, x0=(0.0, 0.0, 0.0, 0.0), t0: float = 0.0) -> np.ndarray:
+    """The reference: :meth:`PlantModel.simulate` (a Python loop of the plant's RK4 step in CasADi's virtual machine),
+    for parameters or a full parameter vector; the states at ``t0, t0 + step, ...``, ``(n + 1, 4)``."""
+    if not isinstance(params, PlantParameters):
+        params = PlantParameters(**dict(zip(PlantParameters.names(), map(float, params))))
+    return PlantModel().simulate(params, V, step, x0, t0=t0)
 
 
 def prepared(log: RampLog, step: float) -> tuple[list[_polish.Anchors], _polish.Space]:

@@ -11,9 +11,9 @@ import re
 import numpy as np
 import pytest
 import scipy.io
+from fit_helpers import simulate
 
 from pendulab.calibration import fit as fit_module
-from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, an independent replay of the log
 from pendulab.calibration.files import load_calibration, save_calibration
 from pendulab.calibration.fit import DEFAULT_FIT, fit_parameters, ramp_start
 from pendulab.calibration.logs import RampLog, read_log, write_log

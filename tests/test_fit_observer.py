@@ -16,10 +16,10 @@ import sys
 
 import numpy as np
 import pytest
+from fit_helpers import simulate
 
 from pendulab.calibration import _observer  # private: the fit's search is what this checks
 from pendulab.calibration._replay import observe, replay  # private: the observer is what this checks
-from pendulab.calibration._simulation import simulate
 from pendulab.calibration.synthetic import RIGS, closed_loop_params, synthetic_log
 from pendulab.model.parameters import PlantParameters
 
@@ -42,7 +42,7 @@ def sets_around(true: PlantParameters, m: int, seed: int) -> np.ndarray:
 
 
 def test_the_observer_equals_the_plant_stepped_and_corrected_sample_by_sample(sweep):
-    """Against the same RK4 step in CasADi's virtual machine (pendulab.calibration._simulation), one sample at a
+    """Against the same RK4 step in CasADi's virtual machine (PlantModel.simulate), one sample at a
     time, with the correction applied in numpy: the same predictions for every set (3 sets: padded to 16)."""
     log = sweep
     n = 1200  # several chunks of 500, the last one partial

@@ -44,12 +44,12 @@ def test_a_batched_replay_is_bitwise_the_same_on_one_and_two_threads():
 
 def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set():
     """The compiled replay (parameter sets in vector lanes, a short last group, arrays passed in place) against
-    :func:`pendulab.calibration._simulation.simulate`, the plant's RK4 step unrolled in CasADi's virtual machine
+    :meth:`pendulab.model.plant.PlantModel.simulate`, the plant's RK4 step in CasADi's virtual machine
     one set at a time with every parameter an input: the same states, sample by sample, for every set."""
     import numpy as np
+    from fit_helpers import simulate
 
     from pendulab.calibration._replay import replay  # private: the fit's replay is what this checks
-    from pendulab.calibration._simulation import simulate
     from pendulab.calibration.synthetic import RIGS, synthetic_log
 
     log = synthetic_log("chirp", RIGS["unseen"], duration=2.2, voltage_noise=0.0)

@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 import pytest
+from fit_helpers import simulate
 
 from pendulab.calibration._polish import rests  # private: the fit's rest detection is checked on known shapes
 from pendulab.calibration._replay import replay  # private: the fit's replay (restarts at rests) is checked
-from pendulab.calibration._simulation import simulate  # private: the fit's batch simulator, the reference replay
 from pendulab.calibration.fit import fit_parameters
 from pendulab.calibration.synthetic import TRUE, synthetic_log
 from pendulab.model.parameters import PlantParameters

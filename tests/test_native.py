@@ -101,7 +101,7 @@ def test_fit_functions_fall_back_to_casadis_virtual_machine(monkeypatch, cache):
     monkeypatch.setattr(native, "find_compiler", lambda: None)
     _replay._compiled.cache_clear()
     try:
-        assert not _replay.observer_compiled(PlantParameters.preset("none"), 1e-3, ("Beq",))
+        assert not _replay.prepare(PlantParameters.preset("none"), [1e-3], ("Beq",))
         in_vm = _replay.replay(sets, V, t, np.zeros(4), restart, free=("Beq",))
         assert not any(cache.rglob("pendulab_replay*"))
         if compiler:

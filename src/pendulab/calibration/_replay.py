@@ -203,13 +203,16 @@ def _in_vm(one: ca.Function, x0: np.ndarray, per_sample: list, P: np.ndarray, h:
     return [np.stack([np.asarray(r[i]).T for r in rows]) for i in range(len(rows[0]))]
 
 
-def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> None:
-    """Build (or load) the compiled replay and observer for each sample period ahead of use."""
+def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[str]) -> bool:
+    """Build (or load) the compiled replay and observer for each sample period ahead of use; whether the observer
+    runs as compiled C for every period (else in CasADi's virtual machine, many times slower)."""
     free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
-    for period in sorted(set(periods)):
+    compiled = True
+    for n_sub in sorted({substeps(period, MAX_SUBSTEP) for period in periods}):
         for single in (False, True):  # batches, and the check's lone set
-            _compiled(substeps(period, MAX_SUBSTEP), free_idx, fixed, single=single)
-        _compiled(substeps(period, MAX_SUBSTEP), free_idx, fixed, 2 if params.Mp > 0 else 1)  # the search's observer
+            _compiled(n_sub, free_idx, fixed, single=single)
+        compiled &= _compiled(n_sub, free_idx, fixed, 2 if params.Mp > 0 else 1) is not None  # the search's observer
+    return compiled
 
 
 def replay(
@@ -263,12 +266,6 @@ def replay(
     states = np.empty((m, n, 4))
     run(ctypes.c_int(m), ctypes.c_int(n), *map(_pointer, (x0, V, t, r, sr, P)), ctypes.c_double(h), _pointer(states))
     return states
-
-
-def observer_compiled(params: PlantParameters, period: float, free: Sequence[str]) -> bool:
-    """Whether :func:`observe` runs as compiled C here (else in CasADi's virtual machine, many times slower)."""
-    free_idx, fixed = _split(np.asarray(params.as_vector(), dtype=float), free)
-    return _compiled(substeps(period, MAX_SUBSTEP), free_idx, fixed, 2 if params.Mp > 0 else 1) is not None
 
 
 def observe(

@@ -11,11 +11,11 @@ Examples
 --------
 >>> import numpy as np
 >>> from pendulab.calibration.logs import RampLog
->>> from pendulab.calibration._simulation import simulate
+>>> from pendulab.model.plant import PlantModel
 >>> p = PlantParameters.preset("none", Beq=9.0, force_gain=0.7)
 >>> t = np.arange(4000) * 1e-3
 >>> V = 6.0 * np.sin(2 * np.pi * 0.5 * t)
->>> x = simulate(p, V, 1e-3, np.zeros(4))[:, 0]
+>>> x = PlantModel().simulate(p, V, 1e-3)[:, 0]
 >>> start = log_start([RampLog(np.r_[t, 4.0], np.r_[V, 0.0], x)], PlantParameters.preset("none"))
 >>> round(start.force_gain, 1), round(start.Beq)
 (0.7, 9)

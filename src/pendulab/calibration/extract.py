@@ -279,17 +279,18 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
 def _fit_F2(log: RampLog, lo: int, hi: int, params: PlantParameters, F_low: float, F_high: float) -> float | None:
     """Best ``F2`` in ``[F_low, F_high]`` for the samples ``lo:hi`` (cart at rest at ``lo``), by a coarse-to-fine
     grid (see the module docstring); ``None`` if it is not much better than ``F2 = F_high``."""
-    from pendulab.calibration._simulation import simulate_many
+    from pendulab.calibration._replay import replay
+    from pendulab.calibration.fit import DEFAULT_FIT
 
     if hi - lo < 20 or F_high <= F_low:
         return None
-    V, x, dt = log.V[lo:hi], log.x[lo:hi], log.period
+    x = log.x[lo:hi]
     x0 = np.array([x[0], 0.0, 0.0, 0.0])
 
     def costs(candidates: np.ndarray) -> np.ndarray:
         sets = [params.with_values(F2=float(F2)) for F2 in candidates]
-        # 0.5 ms sub-steps: the voltage changes once per sample; finer steps change the fit by < 1 %.
-        states = simulate_many(sets, V[:-1], dt, x0, t0=float(log.t[lo]), max_substep=5e-4)
+        # The fit's replay (its parameters free: the compiled library the fit uses, no other to build).
+        states = replay(sets, log.V[lo : hi - 1], log.t[lo : hi - 1], x0, free=DEFAULT_FIT)
         return np.sum((states[:, :, 0] - x[None, 1:]) ** 2, axis=1)
 
     left, right = F_low, F_high

@@ -824,9 +824,8 @@ def fit_parameters(
         pieces=_pieces(logs, stride), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
         polish_iter=polish_iter, polish_work=polish_work,
     )
-    if compile is not False:
-        _replay.prepare(params0, [log.period for log in logs], names)  # the replay and the observer, compiled once per machine
-    if compile is False or not all(_replay.observer_compiled(params0, log.period, names) for log in logs):
+    # The replay and the observer, compiled once per machine.
+    if compile is False or not _replay.prepare(params0, [log.period for log in logs], names):
         from pendulab.native import VM_FALLBACK_NOTE, install_hint
 
         progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")

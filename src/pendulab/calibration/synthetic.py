@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pendulab.calibration._simulation import simulate
 from pendulab.calibration.logs import RampLog
 from pendulab.model.parameters import PlantParameters
+from pendulab.model.plant import PlantModel
 
 #: Sample period of the synthetic logs (s).
 STEP = 1e-3
@@ -113,7 +113,7 @@ def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 
     for i in range(0, n, block):
         x = states[i, 0]
         V[i : i + block] = np.clip(V_plan[i : i + block] - 20.0 * x * (abs(x) > cart_hold * 0.5), -params.V_max, params.V_max)
-        part = simulate(params, V[i : i + block], STEP, states[i], t0=i * STEP)
+        part = PlantModel().simulate(params, V[i : i + block], STEP, states[i], t0=i * STEP)
         states[i : i + part.shape[0]] = part
     t = np.arange(n + 1) * STEP
     return _measured(t, np.append(V, 0.0), states[:, 0], params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")

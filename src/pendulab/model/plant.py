@@ -485,13 +485,14 @@ class PlantModel:
         step: float = 1e-3,
         x0: Sequence[float] = (0.0, 0.0, 0.0, 0.0),
         substep: float = MAX_SUBSTEP,
+        t0: float = 0.0,
     ) -> np.ndarray:
         """Reference integration: RK4 sub-steps of the CasADi right-hand side, voltage held per step.
 
         Parameters
         ----------
         V : array (n,)
-            Voltage held during each communication step of length ``step``.
+            Voltage held during each communication step of length ``step``, the first from ``t0``.
 
         Returns
         -------
@@ -508,7 +509,7 @@ class PlantModel:
         out[0] = x0
         state = np.asarray(x0, dtype=float)
         for k, v in enumerate(V):
-            state = np.asarray(one_step(state, v, p, k * step, h)).ravel()
+            state = np.asarray(one_step(state, v, p, t0 + k * step, h)).ravel()
             out[k + 1] = state
         return out
 
