@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -72,15 +73,22 @@ def test_calibrate_user_errors(capsys, tmp_path, argv, words):
     assert only_file(tmp_path) == []
 
 
-def test_calibrate_out_is_a_directory(capsys, tmp_path):
+def test_calibrate_out_is_a_directory_or_empty(capsys, tmp_path):
     status, _, err = run(capsys, "calibrate", "--virtual", "--out", str(tmp_path))
     assert status == 2 and "is a directory" in err
+    status, _, err = run(capsys, "calibrate", "--virtual", "--out", "")
+    assert status == 2 and "--out is empty" in err
 
 
 def test_without_virtual_through_the_console_script(tmp_path):
     result = subprocess.run([sys.executable, "-m", "pendulab", "calibrate"], capture_output=True, text=True, cwd=tmp_path)
     assert result.returncode == 2
     assert result.stderr.startswith("pendulab: error:") and result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+
+
+def swing(x_unit: float, V_unit: float) -> str:
+    """A cart swung by a sine of 2 V (1 kHz, 0.6 s), its x and V in other units (or signs)."""
+    return "t,V,x\n" + "".join(f"{k * 1e-3:.3f},{V_unit * 2 * math.sin(k / 100):.6g},{x_unit * 0.02 * (1 - math.cos(k / 100)):.6g}\n" for k in range(600))
 
 
 def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
@@ -91,6 +99,13 @@ def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
         "NaN": ("t,V,x\n0,0,0\n0.001,0.1,nan\n0.002,0.2,0\n", "x is not finite"),
         "too short": ("t,V,x\n" + "".join(f"{k * 1e-3},{k * 0.01},{k * 1e-6}\n" for k in range(12)), "too short"),
         "never moves": ("t,V,x\n" + "".join(f"{tt:.3f},{min(tt, 0.5):.4f},0.001\n" for tt in t), "never moves"),
+        # Units and signs a log made elsewhere gets wrong: each named before any work.
+        "t in ms": ("t,V,x\n" + "".join(f"{k},{2 * math.sin(k / 100):.4f},{0.02 * (1 - math.cos(k / 100)):.6f}\n" for k in range(600)),
+                    "if t is in milliseconds, give it in seconds"),
+        "x in mm": (swing(1e3, 1.0), "give x in metres"),
+        "V in mV": (swing(1.0, 1e3), "give V in volts"),
+        "against V": (swing(-1.0, 1.0), "V or x has the wrong sign"),
+        "first step": ("t,V,x\n-0.0004,0,0\n" + swing(1.0, 1.0).split("\n", 2)[2], "the sample period varies from 1 to 1.4 ms"),
     }
     paths = {}
     for i, (name, (text, words)) in enumerate(cases.items()):
@@ -117,6 +132,9 @@ def test_fit_bad_options(capsys, calibrated, tmp_path):
     _, log = calibrated
     for argv, words in [
         (["--fit", "F1,Mp"], "cannot fit 'Mp'"),
+        (["--fit", ""], "--fit: no parameter named"),
+        (["--out", ""], "--out is empty"),  # an unset "$OUT" in a script: refused, not a fit that writes nothing
+        (["--plot", ""], "--plot is empty"),
         (["--plot", str(tmp_path / "fit.jpg")], "must be a .png file"),
         (["--out", str(tmp_path)], "is a directory"),
         (["--calibration", str(tmp_path / "missing.json")], "does not exist"),

@@ -60,6 +60,10 @@ def test_write_and_read_back(tmp_path):
         ("t,V,x\n0,0,0\n0.002,0,0\n0.001,0,0\n", "time is not increasing at sample 3"),
         ("t,V,x\n0,0,0\n0.001,nan,0\n", "V is not finite"),
         ("t,V,x\n0,0,0\n0.001,zero,0\n", "V='zero' is not a number"),
+        ("t,V,x\n0,0,0\n0.001,,0\n", "V='' is not a number; fill the cell or remove the row"),
+        ("t;V;x\n0;0;0\n0,001;1,5;0\n", "is not a number; write numbers with a decimal point, not a comma"),
+        ("t,V,x,V\n0,0,0,0\n0.001,1,0,1\n", "column V appears twice in the header"),
+        ("t,V,x\n1000,0,0\n1000,0,0\n", "a repeated time stamp: write t with more digits"),
         ("t,V,x\n0,0,0\n0.001,0\n", "2 fields but the header has 3"),
         ("0,0,0\n0.001,0,0\n", "no header line"),
         ("t,V,x\n0,0,0\n", "1 sample(s)"),
@@ -71,6 +75,18 @@ def test_malformed_logs_give_one_clear_line(tmp_path, text, words):
     with pytest.raises(CalibrationError) as info:
         read_log(path)
     assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_byte_order_mark_is_read_and_other_encodings_are_named(tmp_path):
+    """Excel's "CSV UTF-8" starts with a byte-order mark: the columns are found; a Latin-1 file gets one line saying
+    what to save it as."""
+    log = read_log(csv_file(tmp_path, "\ufefft,V,x\n0,0,0\n0.001,1,0\n0.002,1,0.001\n"))
+    assert np.array_equal(log.x, [0, 0, 0.001])
+    latin = tmp_path / "latin.csv"
+    latin.write_bytes("# rig 3, 20 \u00b0C\nt,V,x\n0,0,0\n0.001,1,0\n".encode("latin-1"))
+    with pytest.raises(CalibrationError) as info:
+        read_log(latin)
+    assert "is not UTF-8 text" in str(info.value) and "save it as UTF-8" in str(info.value) and "\n" not in str(info.value)
 
 
 def test_missing_log_and_non_mat_file(tmp_path):

@@ -42,17 +42,20 @@ def test_a_batched_replay_is_bitwise_the_same_on_one_and_two_threads():
     assert len(one) == 64 and one == two
 
 
-def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set():
+@pytest.mark.parametrize("stride", [1, 10])
+def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set(stride):
     """The compiled replay (parameter sets in vector lanes, a short last group, arrays passed in place) against
     :meth:`pendulab.model.plant.PlantModel.simulate`, the plant's RK4 step in CasADi's virtual machine
-    one set at a time with every parameter an input: the same states, sample by sample, for every set."""
+    one set at a time with every parameter an input: the same states, sample by sample, for every set. At 1 kHz,
+    and at 100 Hz (100 sub-steps a sample, in chunks: unrolled, gcc took more than 5 minutes over them)."""
     import numpy as np
     from fit_helpers import simulate
 
     from pendulab.calibration._replay import replay  # private: the fit's replay is what this checks
     from pendulab.calibration.synthetic import RIGS, synthetic_log
 
-    log = synthetic_log("chirp", RIGS["unseen"], duration=2.2, voltage_noise=0.0)
+    log = synthetic_log("chirp", RIGS["unseen"], duration=2.2 * stride, voltage_noise=0.0)
+    log = type(log)(log.t[::stride], log.V[::stride], log.x[::stride])
     rng = np.random.default_rng(7)
     base = np.asarray(RIGS["unseen"].as_vector(), dtype=float)
     free = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
@@ -69,10 +72,12 @@ def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set():
 
 
 @pytest.mark.parametrize("observer", [0, 2])
-def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer):
+@pytest.mark.parametrize("stride", [1, 3])
+def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer, stride):
     """The replay (with restarts) and the observer of the position and the angle, built for 1, 2, 4 and 8 lanes
     in one group or 4 interleaved, against the same step evaluated in CasADi's virtual machine: equal bit for bit,
-    for the pendulum's sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them)."""
+    for the pendulum's sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them).
+    A 1 kHz log, and one of 3 ms (30 sub-steps a sample, run as 3 chunks of 10)."""
     import casadi as ca
     import numpy as np
 
@@ -81,11 +86,13 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer):
     from pendulab.calibration.synthetic import RIGS, synthetic_log
     from pendulab.model.parameters import PlantParameters
 
-    log = synthetic_log("chirp", RIGS["unseen"], duration=0.6, voltage_noise=0.0)
+    log = synthetic_log("chirp", RIGS["unseen"], duration=0.6 * stride, voltage_noise=0.0)
+    log = type(log)(log.t[::stride], log.V[::stride], log.x[::stride])
     n, free = len(log), ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
     base = np.asarray(PlantParameters.preset("long").as_vector(), dtype=float)
     sets = base * np.exp(np.random.default_rng(3).normal(0.0, 0.2, (5, base.size)))
     key, P, h = _replay._key(sets, log.t, free)
+    assert key[0] == 10 * stride and _replay._chunk(key[0]) == 10
     x0 = np.array([0.0, 0.0, 0.05, 0.0])
     if observer:
         y = np.column_stack([log.x, 0.02 * np.sin(3 * log.t)])
@@ -99,7 +106,7 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer):
         inputs = (x0, log.V, log.t, r, sr, P)
         per_sample = [log.V[None], log.t[None], r[None], sr.T]
         outputs = [np.empty((5, n, 4))]
-    vm = _replay._in_vm(_replay._step(*key, observer), x0, per_sample, P, h)
+    vm = _replay._in_vm(_replay._sample(*key, observer), x0, per_sample, P, h)
     for lanes, ways in ((1, 1), (2, 4), (4, 4), (8, 1)):
         run = _replay._load(_replay._source(*key, observer, ways), f"pendulab_lanes_test_{observer}", ("-O2", f"-DLANES={lanes}"))
         assert run is not None, "no C compiler"

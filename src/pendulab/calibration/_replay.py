@@ -65,18 +65,20 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
         vd s[WAYS][4], ns[WAYS][4], th[WAYS][NTH];
         start_group(g, m, x0, P, s, th);
         for (int k = 0; k < n; ++k) {
-            step(s, V[k], t[k], r[k], sr + 4 * (size_t)k, th, h, ns);
+            for (int j = 0; j < CHUNKS; ++j) {  /* the sample's sub-steps, SUB at a time (see _chunk) */
+                step(s, V[k], j ? t[k] + j * (SUB * h) : t[k], j ? 0.0 : r[k], sr + 4 * (size_t)k, th, h, ns);
+                for (int w = 0; w < WAYS; ++w)
+                    for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
+            }
             for (int q = 0; q < size && g * size + q < m; ++q)
                 for (int i = 0; i < 4; ++i) states[((size_t)(g * size + q) * n + k) * 4 + i] = ns[q / LANES][i][q % LANES];
-            for (int w = 0; w < WAYS; ++w)
-                for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
         }
     }
 }
 """
 #: The observer's: the step predicts the outputs (``pm``) and corrects the state towards ``y`` (``ns``).
 _OBSERVE = r"""
-static inline void step(vd (*s)[4], double V, double t, const double *y, const double *gain, vd (*th)[NTH], double h, vd (*ns)[4], vd (*pm)[NY]) {
+static inline void step(vd (*s)[4], double V, double t, const double *y, const double *gain, double c, vd (*th)[NTH], double h, vd (*ns)[4], vd (*pm)[NY]) {
 STEP
 }
 void pendulab_run(int m, int n, const double *x0, const double *V, const double *t, const double *y, const double *gain,
@@ -87,30 +89,44 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
         vd s[WAYS][4], ns[WAYS][4], pm[WAYS][NY], th[WAYS][NTH];
         start_group(g, m, x0, P, s, th);
         for (int k = 0; k < n; ++k) {
-            step(s, V[k], t[k], y + NY * (size_t)k, gain, th, h, ns, pm);
+            for (int j = 0; j < CHUNKS; ++j) {  /* corrected after the last chunk only (c = 1) */
+                step(s, V[k], j ? t[k] + j * (SUB * h) : t[k], y + NY * (size_t)k, gain, j == CHUNKS - 1, th, h, ns, pm);
+                for (int w = 0; w < WAYS; ++w)
+                    for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
+            }
             for (int q = 0; q < size && g * size + q < m; ++q) {
                 const size_t row = (size_t)(g * size + q) * n + k;
                 for (int i = 0; i < NY; ++i) predicted[row * NY + i] = pm[q / LANES][i][q % LANES];
                 for (int i = 0; i < 4; ++i) corrected[row * 4 + i] = ns[q / LANES][i][q % LANES];
             }
-            for (int w = 0; w < WAYS; ++w)
-                for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
         }
     }
 }
 """
 
 
+#: At most this many RK4 sub-steps are unrolled into the compiled step; a sample of more (a log coarser than 1 ms) runs
+#: them in chunks of :func:`_chunk` (the C of 100 unrolled sub-steps, a 100 Hz log's, took gcc longer than 5 minutes).
+MAX_UNROLLED = 10
+
+
+def _chunk(n_sub: int) -> int:
+    """The sub-steps of one chunk: the largest divisor of ``n_sub`` up to :data:`MAX_UNROLLED`."""
+    return max(d for d in range(1, MAX_UNROLLED + 1) if n_sub % d == 0)
+
+
 @lru_cache(maxsize=None)
 def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One sample of the replay, or of the observer of ``observer`` outputs (1: the position; 2: and the angle).
+    """One chunk (:func:`_chunk` of the ``n_sub`` sub-steps) of a sample of the replay, or of the observer of
+    ``observer`` outputs (1: the position; 2: and the angle).
 
     The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where
-    ``r > 0.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], theta, h) -> (corrected[4], predicted[ny],
-    corrected[4])``. Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are inputs; the
-    others are the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
+    ``r > 0.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny],
+    corrected[4])``, the correction times ``c`` (1 after a sample's last chunk, else 0). Only the parameters ``free``
+    (indices into :meth:`PlantParameters.names`) are inputs; the others are the constants ``fixed``, so that a cart
+    without a pendulum loses every pendulum term.
     """
-    step = step_function(False, n_sub).expand()
+    step = step_function(False, _chunk(n_sub)).expand()
     s, V, t, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
     theta = ca.SX.sym("theta", len(free))
     entries = [ca.SX(v) for v in fixed]
@@ -118,13 +134,31 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
         entries[i] = theta[j]
     p = ca.vertcat(*entries)
     if observer:
-        y, gain = ca.SX.sym("y", observer), ca.SX.sym("gain", 4, observer)
+        y, gain, c = ca.SX.sym("y", observer), ca.SX.sym("gain", 4, observer), ca.SX.sym("c")
         predicted = step(s, V, p, t, h)
         measured = predicted[[0, 2][:observer]]
-        corrected = predicted + ca.mtimes(gain, y - measured)
-        return ca.Function("observe_step", [s, V, t, y, gain, theta, h], [corrected, measured, corrected])
+        corrected = predicted + c * ca.mtimes(gain, y - measured)
+        return ca.Function("observe_step", [s, V, t, y, gain, c, theta, h], [corrected, measured, corrected])
     r, sr = ca.SX.sym("r"), ca.SX.sym("sr", 4)
     return ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
+
+
+@lru_cache(maxsize=None)
+def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
+    """One whole sample for CasADi's virtual machine: :func:`_step`'s chunks as the compiled drivers run them
+    (the same operations: the same bits); its inputs without the observer's ``c``."""
+    one, chunks = _step(n_sub, free, fixed, observer), n_sub // _chunk(n_sub)
+    ins = [ca.SX.sym(one.name_in(i), one.sparsity_in(i)) for i in range(one.n_in())]
+    s, V, t, h = ins[0], ins[1], ins[2], ins[-1]
+    for j in range(chunks):
+        tj = t + j * (_chunk(n_sub) * h) if j else t
+        if observer:
+            out = one(s, V, tj, ins[3], ins[4], float(j == chunks - 1), ins[6], h)
+        else:
+            out = [one(s, V, tj, ins[3] if j == 0 else 0.0, ins[4], ins[5], h)]
+        s = out[0]
+    kept = [i for i in range(one.n_in()) if not (observer and i == 5)]
+    return ca.Function(one.name(), [ins[i] for i in kept], out if observer else [s])
 
 
 def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, ways: int = WAYS) -> str:
@@ -132,12 +166,14 @@ def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
     one = _step(n_sub, free, fixed, observer)
     broadcast = lambda name: lambda j, g: f"bc({name})"  # noqa: E731  (the same for every set)
     if observer:
-        inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), lambda j, g: f"bc(y[{j}])", lambda j, g: f"bc(gain[{j}])", lambda j, g: f"th[{g}][{j}]", broadcast("h")]
+        inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), lambda j, g: f"bc(y[{j}])", lambda j, g: f"bc(gain[{j}])", broadcast("c"),
+                  lambda j, g: f"th[{g}][{j}]", broadcast("h")]
         outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};", lambda j, e, g: f"pm[{g}][{j}] = {e};", lambda j, e, g: ""]
     else:
         inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), broadcast("r"), lambda j, g: f"bc(sr[{j}])", lambda j, g: f"th[{g}][{j}]", broadcast("h")]
         outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};"]
-    defines = f"#define WAYS {ways}\n#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
+    defines = (f"#define WAYS {ways}\n#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
+               f"#define SUB {_chunk(n_sub)}\n#define CHUNKS {n_sub // _chunk(n_sub)}\n")
     return simd.PRELUDE + defines + _GROUP + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs, ways))
 
 
@@ -262,7 +298,7 @@ def replay(
             r[k], sr[k] = 1.0, state
     run = _compiled(*key, single=m == 1)
     if run is None:
-        return _in_vm(_step(*key), x0, [V[None], t[None], r[None], sr.T], P, h)[0]
+        return _in_vm(_sample(*key), x0, [V[None], t[None], r[None], sr.T], P, h)[0]
     states = np.empty((m, n, 4))
     run(ctypes.c_int(m), ctypes.c_int(n), *map(_pointer, (x0, V, t, r, sr, P)), ctypes.c_double(h), _pointer(states))
     return states
@@ -307,7 +343,7 @@ def observe(
     g = np.asarray(gain, dtype=float).reshape(4, ny).T.ravel().copy()  # column-major (4 x ny), as CasADi's
     run = _compiled(*key, ny, single=m == 1)
     if run is None:
-        corrected, predicted, _ = _in_vm(_step(*key, ny), x0, [V[None], t[None], Y.T, ca.repmat(ca.DM(g).reshape((4, ny)), 1, n)], P, h)
+        corrected, predicted, _ = _in_vm(_sample(*key, ny), x0, [V[None], t[None], Y.T, ca.repmat(ca.DM(g).reshape((4, ny)), 1, n)], P, h)
     else:
         predicted, corrected = np.empty((m, n, ny)), np.empty((m, n, 4))
         run(ctypes.c_int(m), ctypes.c_int(n), *map(_pointer, (x0, V, t, Y, g, P)), ctypes.c_double(h), _pointer(predicted), _pointer(corrected))

@@ -371,11 +371,65 @@ RECORD_INSTEAD = (
 )
 
 
-def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: Callable[[RampLog], int]) -> None:
+#: The coarsest sample period (s) the fit takes: a rig's log is sampled at 1 kHz or so; 1 s is a time in milliseconds.
+MAX_PERIOD = 0.05
+
+
+def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samples: Callable[[RampLog], int]) -> None:
+    """Refuse, in one line each, the logs the fit cannot use or that are in the wrong units (before any work)."""
     if not logs:
         raise CalibrationError("no log to fit; give at least one log file")
     for log in logs:
         where = f"log {log.source}" if log.source else "log"
+        M = interval_samples(log)
+        length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
+        travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
+        # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
+        edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
+        stride = max(M, (length // 8) // M * M)
+        for first in range(0, len(log) - length + 1, stride):
+            changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
+            moved = (travel[first + length - 1] - travel[first]) / max(travel[-1], 1e-12)
+            candidates.append((changes + moved, j, first, length))
+    chosen: list[tuple[int, int, int]] = []
+    for _, j, first, length in sorted(candidates, key=lambda c: -c[0]):
+        if all(j != k or first + length <= f or f + n <= first for k, f, n in chosen):
+            chosen.append((j, first, length))
+        if len(chosen) * PIECE_SECONDS >= STAGE_SECONDS:
+            break
+    return [(logs[j].slice(first, first + length), j, first) for j, first, length in sorted(chosen)]
+
+
+#: What to record instead of a log that determines nothing.
+RECORD_INSTEAD = (
+    "slow voltage ramps in both directions with rests between (the breakaway, F1: 'pendulab calibrate --log'), "
+    "fast steps (the drive and Beq) or a sine sweep (the slip region, B)"
+)
+
+
+#: The coarsest sample period (s) the fit takes: a rig's log is sampled at 1 kHz or so; 1 s is a time in milliseconds.
+MAX_PERIOD = 0.05
+
+
+def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samples: Callable[[RampLog], int]) -> None:
+    """Refuse, in one line each, the logs the fit cannot use or that are in the wrong units (before any work)."""
+    if not logs:
+        raise CalibrationError("no log to fit; give at least one log file")
+    for log in logs:
+        where = f"log {log.source}" if log.source else "log"
+        steps = np.diff(log.t)
+        if np.max(np.abs(steps - log.period)) > 0.1 * log.period:
+            raise CalibrationError(
+                f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms; resample it to a fixed period"
+            )
+        if log.period > MAX_PERIOD:
+            raise CalibrationError(f"{where}: the sample period is {log.period:g} s; if t is in milliseconds, give it in seconds "
+                                   f"(the fit needs at least {1 / MAX_PERIOD:.0f} samples a second; a rig logs about 1000)")
+        track = 2 * params0.track_half_length
+        if np.ptp(log.x) > 2 * track:
+            raise CalibrationError(f"{where}: x spans {np.ptp(log.x):.3g} m, more than the track's {track:.2g} m; give x in metres")
+        if np.max(np.abs(log.V)) > 3 * params0.V_max:
+            raise CalibrationError(f"{where}: V reaches {np.max(np.abs(log.V)):.4g} V, the amplifier gives at most {params0.V_max:g} V; give V in volts")
         M = interval_samples(log)
         if len(log) < 2 * M + 1:
             raise CalibrationError(
@@ -391,13 +445,11 @@ def _check_logs(logs: Sequence[RampLog], with_pendulum: bool, interval_samples: 
                 f"{where}: the voltage is constant ({float(np.mean(log.V)):.3g} V), so the force gain, Beq and the friction "
                 f"cannot be told apart (a steady speed fits any of them); record {RECORD_INSTEAD}"
             )
-        if with_pendulum and log.alpha is None:
+        if params0.Mp > 0 and log.alpha is None:
             raise CalibrationError(f"{where} has no alpha column; fitting with a pendulum needs the logged angle (or use --pendulum none)")
-        steps = np.diff(log.t)
-        if np.max(steps) > 1.5 * np.min(steps):
-            raise CalibrationError(
-                f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms; resample it to a fixed period"
-            )
+        if params0.Mp == 0 and np.corrcoef(log.V[:-1], np.diff(log.x))[0, 1] < -0.3:  # the cart alone goes where V pushes it
+            raise CalibrationError(f"{where}: the cart moves against the voltage (V and the speed correlate at "
+                                   f"{np.corrcoef(log.V[:-1], np.diff(log.x))[0, 1]:.2f}); V or x has the wrong sign: flip one")
 
 
 # ---------------------------------------------------------------------- the fit's stages
@@ -804,9 +856,8 @@ def fit_parameters(
         raise CalibrationError(f"cannot fit {unknown[0]!r}; choose among {', '.join(FITTABLE)}")
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
-    with_pendulum = params0.Mp > 0
     stride = partial(_stride, interval=interval)  # samples between the state estimates of a log
-    _check_logs(logs, with_pendulum, stride)
+    _check_logs(logs, params0, stride)
     if start not in ("auto", "given"):
         raise CalibrationError(f"start={start!r}: choose 'auto' (from the logs where they are ramp tests) or 'given'")
     if start == "auto":

@@ -149,9 +149,9 @@ def validate_log(log: RampLog) -> None:
     bad = np.flatnonzero(steps <= 0)
     if bad.size:
         k = int(bad[0]) + 1
-        raise CalibrationError(
-            f"{where}: time is not increasing at sample {k + 1} (t={log.t[k]:g} s after {log.t[k - 1]:g} s); sort the log by time"
-        )
+        fix = ("a repeated time stamp: write t with more digits (or remove the repeated row)" if steps[k - 1] == 0
+               else "time goes backwards: sort the log by time")
+        raise CalibrationError(f"{where}: time is not increasing at sample {k + 1} (t={log.t[k]!r} s after {log.t[k - 1]!r} s); {fix}")
 
 
 def _pick(names: Sequence[str], available: Sequence[str]) -> str | None:
@@ -221,9 +221,11 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
 
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CalibrationError(f"log {path} cannot be read as text: {exc}") from None
+        text = path.read_text(encoding="utf-8-sig")  # Excel's "CSV UTF-8" starts with a byte-order mark
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(f"log {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8 (or plain ASCII) CSV") from None
+    except OSError as exc:
+        raise CalibrationError(f"log {path} cannot be read: {exc.strerror or exc}") from None
     lines = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise CalibrationError(f"log {path} is empty; expected a CSV header naming t, V, x and rows of numbers")
@@ -243,6 +245,9 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     header = [h.strip() for h in split(header_line)]
     if any(_is_number(h) for h in header):
         raise CalibrationError(f"log {path} has no header line; the first line must name the columns, e.g. 't,V,x'")
+    twice = sorted({h for h in header if h and header.count(h) > 1})
+    if twice:
+        raise CalibrationError(f"log {path}: column {twice[0]} appears twice in the header; rename or remove one")
     used = {*TIME_NAMES, *VOLTAGE_NAMES, *POSITION_NAMES, *ANGLE_PREFERRED}
     values: dict[str, list[float]] = {name: [] for name in header if name}
     for line_no, line in lines[1:]:
@@ -257,7 +262,9 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
                 values[name].append(float(cell))
             except ValueError:
                 if name in used or name.lower() in {u.lower() for u in used if u != "V"}:
-                    raise CalibrationError(f"log {path}, line {line_no}: {name}={cell!r} is not a number") from None
+                    hint = ("write numbers with a decimal point, not a comma" if "," in cell and _is_number(cell.replace(",", "."))
+                            else "fill the cell or remove the row" if not cell else "repair or remove the row")
+                    raise CalibrationError(f"log {path}, line {line_no}: {name}={cell!r} is not a number; {hint}") from None
                 values[name].append(float("nan"))  # a text column we do not use (e.g. a state name)
     return {name: np.asarray(v, dtype=float) for name, v in values.items()}
 

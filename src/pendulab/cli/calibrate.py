@@ -100,13 +100,13 @@ def run(args: argparse.Namespace) -> int:
     from pendulab.calibration.rig import VirtualRig
 
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = Path(args.out) if args.out else Path("calibration") / f"{stamp}-{'rig' if args.port else 'virtual'}.json"
-    check_output_file(out, "--out", suffixes=(".json",), overwrite=args.overwrite)
+    out = args.out if args.out is not None else Path("calibration") / f"{stamp}-{'rig' if args.port else 'virtual'}.json"
+    out = check_output_file(out, "--out", suffixes=(".json",), overwrite=args.overwrite)
     # On the rig the log always streams to disk (a ramp test is expensive to repeat): beside the
     # calibration when --log is not given.
-    log_path = Path(args.log) if args.log else (out.with_name(out.stem + "-log.csv") if args.port else None)
+    log_path = args.log if args.log is not None else (out.with_name(out.stem + "-log.csv") if args.port else None)
     if log_path is not None:
-        check_output_file(log_path, "--log", suffixes=(".csv",), overwrite=args.overwrite)
+        log_path = check_output_file(log_path, "--log", suffixes=(".csv",), overwrite=args.overwrite)
     nominal = PlantParameters.preset(pendulum="none", cart=args.cart)
     ratio = mass_ratio(PlantParameters.preset(pendulum=args.pendulum, cart=args.cart))
     true = nominal.with_values(**dict(zip(FRICTION_NAMES, args.friction))) if args.friction else nominal

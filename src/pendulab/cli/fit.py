@@ -56,12 +56,12 @@ def run(args: argparse.Namespace) -> int:
 
     names = [n.strip() for n in args.fit.split(",") if n.strip()]
     unknown = [n for n in names if n not in FITTABLE]
-    if unknown:
-        raise CalibrationError(f"--fit: cannot fit {unknown[0]!r}; choose among {', '.join(FITTABLE)}")
+    if unknown or not names:
+        raise CalibrationError(f"--fit: {f'cannot fit {unknown[0]!r}' if unknown else 'no parameter named'}; choose among {', '.join(FITTABLE)}")
     if not (0 < args.interval <= 1.0):
         raise CalibrationError(f"--interval {args.interval} must be in (0, 1] s")
-    out = check_output_file(args.out, "--out", suffixes=(".json",), overwrite=args.overwrite) if args.out else None
-    plot = check_output_file(args.plot, "--plot", suffixes=(".png",), overwrite=args.overwrite) if args.plot else None
+    out = check_output_file(args.out, "--out", suffixes=(".json",), overwrite=args.overwrite) if args.out is not None else None
+    plot = check_output_file(args.plot, "--plot", suffixes=(".png",), overwrite=args.overwrite) if args.plot is not None else None
 
     params0 = PlantParameters.preset(pendulum=args.pendulum, cart=args.cart)
     if args.calibration:

@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         from pendulab.model.parameters import PlantParameters
 
         params = PlantParameters.preset(args.pendulum)
-    if args.out:
+    if args.out is not None:
         check_output_file(args.out, "--out", suffixes=(".toml",), overwrite=args.overwrite)
     design = design_from_text(args.plant, args.q, args.r, args.integral, params)
     poles = [[float(p.real), float(p.imag)] for p in design.closed_loop_poles]
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         for name, k in zip(design.states, design.K):
             print(f"  K_{name:<16} {k: .6g}")
         print("closed-loop poles: " + ", ".join(f"{p.real:.4g}{p.imag:+.4g}j" if p.imag else f"{p.real:.4g}" for p in design.closed_loop_poles))
-    if args.out:
+    if args.out is not None:
         from pendulab.control.state_feedback import save_state_feedback_file
 
         save_state_feedback_file(design, args.out)
