@@ -382,41 +382,11 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
     for log in logs:
         where = f"log {log.source}" if log.source else "log"
         M = interval_samples(log)
-        length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
-        travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
-        # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
-        edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
-        stride = max(M, (length // 8) // M * M)
-        for first in range(0, len(log) - length + 1, stride):
-            changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
-            moved = (travel[first + length - 1] - travel[first]) / max(travel[-1], 1e-12)
-            candidates.append((changes + moved, j, first, length))
-    chosen: list[tuple[int, int, int]] = []
-    for _, j, first, length in sorted(candidates, key=lambda c: -c[0]):
-        if all(j != k or first + length <= f or f + n <= first for k, f, n in chosen):
-            chosen.append((j, first, length))
-        if len(chosen) * PIECE_SECONDS >= STAGE_SECONDS:
-            break
-    return [(logs[j].slice(first, first + length), j, first) for j, first, length in sorted(chosen)]
-
-
-#: What to record instead of a log that determines nothing.
-RECORD_INSTEAD = (
-    "slow voltage ramps in both directions with rests between (the breakaway, F1: 'pendulab calibrate --log'), "
-    "fast steps (the drive and Beq) or a sine sweep (the slip region, B)"
-)
-
-
-#: The coarsest sample period (s) the fit takes: a rig's log is sampled at 1 kHz or so; 1 s is a time in milliseconds.
-MAX_PERIOD = 0.05
-
-
-def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samples: Callable[[RampLog], int]) -> None:
-    """Refuse, in one line each, the logs the fit cannot use or that are in the wrong units (before any work)."""
-    if not logs:
-        raise CalibrationError("no log to fit; give at least one log file")
-    for log in logs:
-        where = f"log {log.source}" if log.source else "log"
+        if len(log) < 2 * M + 1:
+            raise CalibrationError(
+                f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two intervals of the state estimates "
+                "and should contain the cart breaking away and moving"
+            )
         steps = np.diff(log.t)
         if np.max(np.abs(steps - log.period)) > 0.1 * log.period:
             raise CalibrationError(
@@ -430,12 +400,6 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
             raise CalibrationError(f"{where}: x spans {np.ptp(log.x):.3g} m, more than the track's {track:.2g} m; give x in metres")
         if np.max(np.abs(log.V)) > 3 * params0.V_max:
             raise CalibrationError(f"{where}: V reaches {np.max(np.abs(log.V)):.4g} V, the amplifier gives at most {params0.V_max:g} V; give V in volts")
-        M = interval_samples(log)
-        if len(log) < 2 * M + 1:
-            raise CalibrationError(
-                f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two intervals of the state estimates "
-                "and should contain the cart breaking away and moving"
-            )
         if np.ptp(log.x) < 1e-4:
             raise FitRejected(
                 f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um), so the log determines nothing; record {RECORD_INSTEAD}"
