@@ -16,7 +16,6 @@ start a few iterations, then the best one to convergence.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,11 +76,7 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
         ny = a.measured.shape[1]
         predicted = observe(vectors, a.V, a.t, a.measured, a.x0, observer_gain(omega, period, outputs=ny), free=space.names)
         rows.append(((predicted - a.measured[None]) / a.sigma[None, None, :ny]).reshape(len(vectors), -1))
-    r = np.nan_to_num(np.concatenate(rows, axis=1), nan=1e6, posinf=1e6, neginf=-1e6)
-    if space.prior is None:
-        return r
-    centre, weight = space.prior
-    return np.concatenate([r, math.sqrt(weight) * (np.atleast_2d(thetas) - centre[None, :])], axis=1)
+    return space.with_prior(np.nan_to_num(np.concatenate(rows, axis=1), nan=1e6, posinf=1e6, neginf=-1e6), np.atleast_2d(thetas))
 
 
 def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, omega: float, max_iter: int) -> Observed:

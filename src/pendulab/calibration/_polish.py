@@ -340,7 +340,10 @@ class Space:
 
     def residuals(self, logs: list[Anchors], thetas: np.ndarray) -> np.ndarray:
         """Weighted replay errors and the prior's residuals, ``(m, n_residuals)``."""
-        r = replay_errors(logs, self.vectors(thetas), self.names)
+        return self.with_prior(replay_errors(logs, self.vectors(thetas), self.names), thetas)
+
+    def with_prior(self, r: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+        """Errors ``r`` ``(m, n_errors)`` of ``thetas`` ``(m, n)`` and the prior's residuals beside them."""
         if self.prior is None:
             return r
         centre, weight = self.prior
@@ -433,27 +436,11 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                 k = int(np.argmin(c))
                 if c[k] < cost:
                     theta, cost = trials[k], float(c[k])
-        for a_, b_ in GRID_PAIRS:
-            if a_ in names and b_ in names:  # the slip region's corner: where the cart leaves it by force or by speed
-                i, j = names.index(a_), names.index(b_)
-                f = np.exp(np.linspace(-2 * spans[0], 2 * spans[0], 8))
-                trials = np.tile(theta, (f.size**2, 1))
-                trials[:, i] *= np.repeat(f, f.size)
-                trials[:, j] *= np.tile(f, f.size)
-                trials = np.array([space.project(th) for th in trials])
-                c = evaluate(trials)
-                replays += 1
-                k = int(np.argmin(c))
-                if c[k] < cost:
-                    theta, cost = trials[k], float(c[k])
     return Polished(theta, cost, start, rounds, replays)
 
 
 #: Pairs of parameters that trade off, moved together (diagonally) by :func:`polish`.
 PAIRS = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain"))
-#: Pairs scanned on a grid (a factor 9 both ways each): leaving the slip region happens at
-#: ``min(F2, (B + Beq) v2)`` of drive, so a wrong ``F2`` is right only with its own ``v2``.
-GRID_PAIRS = (("F2", "v2"),)
 
 
 def polish(
@@ -489,9 +476,12 @@ def polish(
         done["samples"] += thetas.shape[0] * n_samples
         return space.residuals(logs, thetas)
 
+    def cost_of(thetas: np.ndarray) -> np.ndarray:
+        R = residuals(thetas)
+        return np.einsum("ij,ij->i", R, R)
+
     theta = project(np.asarray(theta, dtype=float).copy())
-    r = residuals(theta[None])[0]
-    cost = start_cost = float(r @ r)
+    cost = start_cost = float(cost_of(theta[None])[0])
     radius, replays, it, n = 0.02, 1, 0, len(theta)
     # The thresholds first (see the docstring), one batched replay per scan. (A coarser sub-step than the plant's,
     # 0.5 ms, is three times faster, but it moved the replay by about an encoder step: a log of steps went astray.)
@@ -504,38 +494,28 @@ def polish(
             trials = np.tile(scanned, (15, 1))
             trials[:, j] = scanned[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), 15))
             trials = np.array([project(th) for th in trials])
-            R = residuals(trials)
             replays += 1
-            scanned = trials[int(np.argmin(np.einsum("ij,ij->i", R, R)))]
+            scanned = trials[int(np.argmin(cost_of(trials)))]
     if scanned is not theta:
-        r_scanned = residuals(scanned[None])[0]
         replays += 1
-        if float(r_scanned @ r_scanned) < cost:
-            theta, r, cost = scanned, r_scanned, float(r_scanned @ r_scanned)
-    momentum = np.zeros(n)
+        if (c := float(cost_of(scanned[None])[0])) < cost:
+            theta, cost = scanned, c
+    momentum, E = np.zeros(n), np.eye(n)
+    pairs = [(names.index(a), names.index(b)) for a, b in PAIRS if a in names and b in names]
     for it in range(1, max_iter + 1):
         if done["samples"] > work:
             break
         # Every parameter up and down by the radius (relative), and the last accepted move again,
         # all in one batched replay.
         size = radius * np.maximum(np.abs(theta), 1e-2)
-        diagonal = []
-        for a_, b_ in PAIRS:
-            if a_ in names and b_ in names:
-                i_, j_ = names.index(a_), names.index(b_)
-                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                    m_ = np.zeros(n)
-                    m_[i_], m_[j_] = si * size[i_], sj * size[j_]
-                    diagonal.append(m_)
-        moves = np.vstack([np.diag(size), -np.diag(size), *([np.array(diagonal)] if diagonal else []), momentum[None, :]])
-        trials = np.array([project(theta + m) for m in moves])
-        R = residuals(trials)
+        diagonal = [si * size[i] * E[i] + sj * size[j] * E[j] for i, j in pairs for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+        trials = np.array([project(theta + m) for m in np.vstack([np.diag(size), -np.diag(size), *diagonal, momentum])])
         replays += 1
-        costs = np.einsum("ij,ij->i", R, R)
+        costs = cost_of(trials)
         best = int(np.argmin(costs))
         if costs[best] < cost * (1 - 1e-6):
             momentum = trials[best] - theta
-            theta, r, cost = trials[best], R[best], float(costs[best])
+            theta, cost = trials[best], float(costs[best])
         else:
             momentum = np.zeros(n)
             radius /= 3.0

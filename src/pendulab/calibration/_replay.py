@@ -152,13 +152,9 @@ def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
     s, V, t, h = ins[0], ins[1], ins[2], ins[-1]
     for j in range(chunks):
         tj = t + j * (_chunk(n_sub) * h) if j else t
-        if observer:
-            out = one(s, V, tj, ins[3], ins[4], float(j == chunks - 1), ins[6], h)
-        else:
-            out = [one(s, V, tj, ins[3] if j == 0 else 0.0, ins[4], ins[5], h)]
+        out = one.call([s, V, tj, *ins[3:5], float(j == chunks - 1), *ins[6:]] if observer else [s, V, tj, ins[3] if j == 0 else 0.0, *ins[4:]])
         s = out[0]
-    kept = [i for i in range(one.n_in()) if not (observer and i == 5)]
-    return ca.Function(one.name(), [ins[i] for i in kept], out if observer else [s])
+    return ca.Function(one.name(), [x for i, x in enumerate(ins) if not (observer and i == 5)], out)
 
 
 def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, ways: int = WAYS) -> str:

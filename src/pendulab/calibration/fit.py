@@ -25,7 +25,7 @@ settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`
 *Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which
 decides whether a push breaks the cart away at all: scans of the thresholds and a pattern search,
 robust 1-D scans along what slow logs confuse (the common scale of the gain, the forces and the drags;
-the split of the drag between ``B`` and ``Beq``; the corner ``F2, v2``), walks along that corner; where the
+the split of the drag between ``B`` and ``Beq``), walks along the slip region's corner ``F2, v2``; where the
 answer still misses by more than :data:`EVOLVE_ABOVE_STEPS` encoder steps an evolution strategy around it
 (CMA-ES), and where it then misses by more than :data:`GLOBAL_ABOVE_STEPS` (the cart alone) the global search:
 CMA-ES on the replay from the start, a factor e either way (:func:`_evolved`). A noisy logged voltage is replayed
@@ -313,7 +313,9 @@ WALK_GAIN = 0.01
 #: seeds found 0.9-1.6 steps (the truth: 0.97), one none lower (15 CPU-s each).
 EVOLVE_ABOVE_STEPS = 1.5
 EVOLVE_SEEDS = (19, 20)
-#: Samples the polish may replay (parameter sets x samples; about 0.5 us each): ~700 sets over 20 s of log.
+#: Pattern-search steps of the polish, and the samples it may replay (parameter sets x samples; about 0.5 us each):
+#: ~700 sets over 20 s of log, a bound on its time that, unlike a clock, gives the same answer on a busy machine.
+POLISH_ITER = 12
 POLISH_WORK = 1.4e7
 #: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the global search (:func:`_evolved`):
 #: CMA-ES on the replay from the start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each
@@ -389,9 +391,7 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
             )
         steps = np.diff(log.t)
         if np.max(np.abs(steps - log.period)) > 0.1 * log.period:
-            raise CalibrationError(
-                f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms; resample it to a fixed period"
-            )
+            raise CalibrationError(f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms; resample it to a fixed period")
         if log.period > MAX_PERIOD:
             raise CalibrationError(f"{where}: the sample period is {log.period:g} s; if t is in milliseconds, give it in seconds "
                                    f"(the fit needs at least {1 / MAX_PERIOD:.0f} samples a second; a rig logs about 1000)")
@@ -436,8 +436,6 @@ class _Setup:
     pieces: list[tuple[RampLog, int, int]]  # what the searches see of long logs (:func:`_pieces`)
     voltage_noise: float  # the logged voltage's sample noise (V; the largest over the logs)
     progress: Callable[[str], None]
-    polish_iter: int
-    polish_work: float
 
     @property
     def with_pendulum(self) -> bool:
@@ -503,7 +501,7 @@ def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEs
     ]
 
 
-def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
+def _observer_search(setup: _Setup) -> _Candidate:
     """Stage 1: the observer search (:mod:`pendulab.calibration._observer`) from the start and (the cart alone)
     the logs' own estimate; the replay's polish goes on from its answer."""
     names, space, theta0, with_pendulum = setup.names, setup.space, setup.theta0, setup.with_pendulum
@@ -517,7 +515,7 @@ def _observer_search(setup: _Setup, start_from_logs: bool) -> _Candidate:
     replays = [_polish.denoised(a) for a in logged] if setup.denoise else list(logged)
     searched = _pieces_of(setup, replays, whole)
     starts = [theta0]
-    if start_from_logs and not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
+    if not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
         from pendulab.calibration._start import log_start
 
         estimate = setup.params0.with_values(**{n: getattr(log_start(setup.logs, setup.params0), n) for n in names})
@@ -552,15 +550,14 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     replays = candidate.replays
     # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
     searched = _pieces_of(setup, replays, candidate.whole)
-    polish_iter, work = setup.polish_iter, setup.polish_work
-    result = _polish.polish(searched, space, candidate.theta, max_iter=polish_iter, work=work)
+    result = _polish.polish(searched, space, candidate.theta, max_iter=POLISH_ITER, work=POLISH_WORK)
     target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
     def walked(result: _polish.Polished) -> _polish.Polished:
         """:func:`_polish.walk` along the slip region's corner, and the polish from where it ends."""
         theta, cost = _polish.walk(searched, space, result.theta, result.cost)
         if cost >= (1 - WALK_GAIN) * result.cost:
             return result
-        result = result.then(_polish.polish(searched, space, theta, max_iter=polish_iter, scan=()), replays=2)
+        result = result.then(_polish.polish(searched, space, theta, max_iter=POLISH_ITER, scan=()), replays=2)
         setup.progress(f"along the valley of v2 and F2, and the polish: cost {result.cost:.4g}")
         return result
 
@@ -573,7 +570,7 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
         scanned = _polish.scan_directions(searched, space, result.theta)
         if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
             break
-        result = walked(result.then(_polish.polish(searched, space, scanned.theta, max_iter=polish_iter, scan=()), replays=scanned.replays))
+        result = walked(result.then(_polish.polish(searched, space, scanned.theta, max_iter=POLISH_ITER, scan=()), replays=scanned.replays))
         setup.progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
     if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
         whole = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
@@ -619,7 +616,7 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
         else:
             theta, cost = _polish.evolve(searched, space, result.theta, result.cost, seed)
         if cost < (1.0 if globally else 1 - WALK_GAIN) * result.cost:
-            found = _polish.polish(searched, space, theta, max_iter=setup.polish_iter, scan=())
+            found = _polish.polish(searched, space, theta, max_iter=POLISH_ITER, scan=())
             result = result.then(found, replays=GLOBAL_GENERATIONS if globally else _polish.EVOLVE_GENERATIONS)
     if result is answer.polished:
         return answer
@@ -758,11 +755,7 @@ def fit_parameters(
     *,
     interval: float = 0.01,
     regularization: float = 1.0,
-    compile: bool | None = None,
-    polish_iter: int = 12,
     start: str = "auto",
-    polish_work: float = POLISH_WORK,
-    start_from_logs: bool = True,
     on_progress: Callable[[str], None] | None = None,
 ) -> FitResult:
     """Fit parameters of the plant to logged runs by least squares (see the module docstring).
@@ -784,20 +777,10 @@ def fit_parameters(
         pendulum's replay restarts (every :data:`pendulab.calibration._polish.UNSTABLE_WINDOW`).
     regularization : float
         Weight of the weak prior towards ``params0`` (0 switches it off).
-    compile : bool, optional
-        Compile the observer and the replay to C (cached per machine); default: when a compiler exists
-        (without one, CasADi's virtual machine evaluates them, several times slower).
-    polish_iter : int
-        Largest number of pattern-search steps of the polish on the true law's replay.
     start : {"auto", "given"}
         ``"auto"``: the friction starts from the ramp-test extraction where the logs are ramp tests
-        (:func:`ramp_start`); ``"given"``: from ``params0``.
-    polish_work : float
-        Samples the polish may replay (parameter sets x samples), a bound on its time that gives the
-        same answer on a busy machine.
-    start_from_logs : bool
-        Also start the observer search from the logs' own estimate (:mod:`pendulab.calibration._start`;
-        not for logs with the pendulum).
+        (:func:`ramp_start`); ``"given"``: from ``params0``. The observer search also starts from the
+        logs' own estimate (:mod:`pendulab.calibration._start`; not for logs with the pendulum).
     on_progress : callable, optional
         Called with a line of text at each stage.
 
@@ -837,14 +820,13 @@ def fit_parameters(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
         space=_polish.Space(params0, names, scales, lower, upper, prior), interval=interval,
         pieces=_pieces(logs, stride), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
-        polish_iter=polish_iter, polish_work=polish_work,
     )
     # The replay and the observer, compiled once per machine.
-    if compile is False or not _replay.prepare(params0, [log.period for log in logs], names):
+    if not _replay.prepare(params0, [log.period for log in logs], names):
         from pendulab.native import VM_FALLBACK_NOTE, install_hint
 
         progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")
-    best = _polished(setup, _observer_search(setup, start_from_logs))
+    best = _polished(setup, _observer_search(setup))
     return _result(setup, _evolved(setup, _evolved(setup, best), globally=True), start_values, t_start)
 
 
