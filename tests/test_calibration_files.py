@@ -55,6 +55,7 @@ def test_round_trip_and_apply(tmp_path):
         ({"friction": {**GOOD["friction"], "v1": 0.1}}, "v1=0.1 m/s is above v2"),
         ({"friction": {**GOOD["friction"], "F1": 5.0}}, "F1=5 N is above F2"),
         ({**GOOD, "force_gain": 0}, "force_gain must be > 0"),
+        ({**GOOD, "Beq": 1e9}, "Beq=1000000000.0 is outside its range 0 to 10000"),  # the plant's (and the FMU's) range
         ({**GOOD, "beq": 4.0}, "unknown entry 'beq'"),
         ({"friction": [1, 2, 3]}, "needs 5 numbers"),
         ([1, 2], "expected a JSON object"),
@@ -67,6 +68,13 @@ def test_malformed_files_give_one_clear_line(tmp_path, data, words):
     message = str(info.value)
     assert words in message and "\n" not in message and str(path) in message
     assert isinstance(info.value, UserError)
+
+
+def test_a_byte_order_mark_is_read(tmp_path):
+    """Windows Notepad's "UTF-8" starts a file with a byte-order mark: the calibration is read as without it."""
+    path = tmp_path / "notepad.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(GOOD).encode())
+    assert load_calibration(path) == load_calibration(write(tmp_path, GOOD))
 
 
 def test_missing_and_unreadable_files(tmp_path):

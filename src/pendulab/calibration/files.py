@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from pendulab.errors import CalibrationError
+from pendulab.errors import CalibrationError, ParameterError
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
 FORMAT = "pendulab-calibration"
@@ -174,6 +174,10 @@ def _validate(friction: Mapping[str, Any], fitted: Mapping[str, Any], source: st
             checked[name] = _number(name, fitted[name], source)
             if name in ("force_gain", "M_cart") and checked[name] == 0:
                 raise CalibrationError(f"{source}: {name} must be > 0")
+    try:  # within the plant's ranges (those of the FMU's variables)
+        PlantParameters().with_values(**checked)
+    except ParameterError as exc:
+        raise CalibrationError(f"{source}: {exc}") from None
     return checked
 
 
@@ -209,7 +213,7 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     if path.suffix.lower() == ".mat":
         return _load_mat(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # Windows Notepad's UTF-8 starts with a byte-order mark
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationError(f"calibration file {path} cannot be read: {exc}") from None
     try:
