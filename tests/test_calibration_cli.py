@@ -86,9 +86,10 @@ def test_without_virtual_through_the_console_script(tmp_path):
     assert result.stderr.startswith("pendulab: error:") and result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
 
 
-def swing(x_unit: float, V_unit: float) -> str:
-    """A cart swung by a sine of 2 V (1 kHz, 0.6 s), its x and V in other units (or signs)."""
-    return "t,V,x\n" + "".join(f"{k * 1e-3:.3f},{V_unit * 2 * math.sin(k / 100):.6g},{x_unit * 0.02 * (1 - math.cos(k / 100)):.6g}\n" for k in range(600))
+def swing(x_unit: float, V_unit: float, x_offset: float = 0.0) -> str:
+    """A cart swung by a sine of 2 V (1 kHz, 0.6 s), its x and V in other units (or signs), x from another zero."""
+    return "t,V,x\n" + "".join(f"{k * 1e-3:.3f},{V_unit * 2 * math.sin(k / 100):.6g},{x_offset + x_unit * 0.02 * (1 - math.cos(k / 100)):.6g}\n"
+                                for k in range(600))
 
 
 def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
@@ -105,6 +106,7 @@ def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
         "x in mm": (swing(1e3, 1.0), "give x in metres"),
         "V in mV": (swing(1.0, 1e3), "give V in volts"),
         "against V": (swing(-1.0, 1.0), "V or x has the wrong sign"),
+        "x from the track's end": (swing(1.0, 1.0, x_offset=0.5), "give x from the track's centre"),
         "first step": ("t,V,x\n-0.0004,0,0\n" + swing(1.0, 1.0).split("\n", 2)[2], "the sample period varies from 1 to 1.4 ms"),
     }
     paths = {}

@@ -398,6 +398,9 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
         track = 2 * params0.track_half_length
         if np.ptp(log.x) > 2 * track:
             raise CalibrationError(f"{where}: x spans {np.ptp(log.x):.3g} m, more than the track's {track:.2g} m; give x in metres")
+        if np.max(np.abs(log.x)) > 1.05 * track / 2:  # the replay's cart would sit at an end stop
+            raise CalibrationError(f"{where}: x reaches {log.x[np.argmax(np.abs(log.x))]:.3g} m, beyond the track's ends (+-{track / 2:.2g} m "
+                                   "from its centre, where x = 0); give x from the track's centre")
         if np.max(np.abs(log.V)) > 3 * params0.V_max:
             raise CalibrationError(f"{where}: V reaches {np.max(np.abs(log.V)):.4g} V, the amplifier gives at most {params0.V_max:g} V; give V in volts")
         if np.ptp(log.x) < 1e-4:

@@ -151,7 +151,7 @@ def validate_log(log: RampLog) -> None:
         k = int(bad[0]) + 1
         fix = ("a repeated time stamp: write t with more digits (or remove the repeated row)" if steps[k - 1] == 0
                else "time goes backwards: sort the log by time")
-        raise CalibrationError(f"{where}: time is not increasing at sample {k + 1} (t={log.t[k]!r} s after {log.t[k - 1]!r} s); {fix}")
+        raise CalibrationError(f"{where}: time is not increasing at sample {k + 1} (t={float(log.t[k])!r} s after {float(log.t[k - 1])!r} s); {fix}")
 
 
 def _pick(names: Sequence[str], available: Sequence[str]) -> str | None:
