@@ -472,12 +472,9 @@ def polish(
     done = {"samples": 0.0}
     n_samples = sum(a.n for a in logs)
 
-    def residuals(thetas: np.ndarray) -> np.ndarray:
-        done["samples"] += thetas.shape[0] * n_samples
-        return space.residuals(logs, thetas)
-
     def cost_of(thetas: np.ndarray) -> np.ndarray:
-        R = residuals(thetas)
+        done["samples"] += thetas.shape[0] * n_samples
+        R = space.residuals(logs, thetas)
         return np.einsum("ij,ij->i", R, R)
 
     theta = project(np.asarray(theta, dtype=float).copy())

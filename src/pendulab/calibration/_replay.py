@@ -147,11 +147,12 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
 def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
     """One whole sample for CasADi's virtual machine: :func:`_step`'s chunks as the compiled drivers run them
     (the same operations: the same bits); its inputs without the observer's ``c``."""
-    one, chunks = _step(n_sub, free, fixed, observer), n_sub // _chunk(n_sub)
+    one, sub = _step(n_sub, free, fixed, observer), _chunk(n_sub)
     ins = [ca.SX.sym(one.name_in(i), one.sparsity_in(i)) for i in range(one.n_in())]
     s, V, t, h = ins[0], ins[1], ins[2], ins[-1]
+    chunks = n_sub // sub
     for j in range(chunks):
-        tj = t + j * (_chunk(n_sub) * h) if j else t
+        tj = t + j * (sub * h) if j else t
         out = one.call([s, V, tj, *ins[3:5], float(j == chunks - 1), *ins[6:]] if observer else [s, V, tj, ins[3] if j == 0 else 0.0, *ins[4:]])
         s = out[0]
     return ca.Function(one.name(), [x for i, x in enumerate(ins) if not (observer and i == 5)], out)
