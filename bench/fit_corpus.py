@@ -36,12 +36,13 @@ SHORT = {"F1": "F1", "v1": "v1", "F2": "F2", "v2": "v2", "B": "B", "Beq": "Beq",
 
 def true_replay_steps(log, true) -> float:
     """RMS replay error of the true values, restarted at rests (an upright pendulum also every 0.25 s, from states
-    settled at the true values, :func:`pendulab.calibration._polish.settled`), in encoder steps (the fit's own objective)."""
+    settled at the true values, :func:`pendulab.calibration._polish.settled`), in encoder steps, as the fit's check
+    measures it (a few stretches that diverge left out, ``fit._diverged``)."""
     import numpy as np
 
     from pendulab.calibration import _polish  # private: the fit's own objective (anchors, denoising) for the true values
     from pendulab.calibration._replay import replay  # private: the fit's own objective (compiled replay)
-    from pendulab.calibration.fit import _initial_states, _noise_level  # private: the fit's own start states and noise level
+    from pendulab.calibration.fit import FORWARD_LIMIT_STEPS, _diverged, _initial_states, _noise_level  # private: the check, start states, noise
 
     with_pendulum = true.Mp > 0
     used = ((len(log) - 1) // 10) * 10 + 1
@@ -52,8 +53,9 @@ def true_replay_steps(log, true) -> float:
         raw = _polish.settled(raw, np.asarray(true.as_vector(), dtype=float), None)
     best = math.inf
     for a in {id(x): x for x in (raw, _polish.denoised(raw))}.values():
-        x = replay(np.asarray(true.as_vector(), dtype=float)[None], a.V, a.t, a.x0, a.restarts)[0, :, 0]
-        best = min(best, math.sqrt(float(np.mean((x - a.measured[:, 0]) ** 2))) / true.q_x)
+        e = replay(np.asarray(true.as_vector(), dtype=float)[None], a.V, a.t, a.x0, a.restarts)[0, :, 0] - a.measured[:, 0]
+        e = e[~_diverged(e, np.searchsorted(a.segments, np.arange(a.n), side="right") - 1, FORWARD_LIMIT_STEPS * true.q_x)]  # as the fit's check
+        best = min(best, math.sqrt(float(np.mean(e**2))) / true.q_x)
     return best
 
 

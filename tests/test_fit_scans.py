@@ -10,6 +10,7 @@ drag split (with the slip region's end speed) and the common scale of the gain, 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from fit_helpers import prepared
@@ -63,3 +64,19 @@ def test_scans_fill_the_compiled_batches_and_find_a_minimum_off_the_start():
     found = _polish.scan_directions([], space, start, rounds=1, cost_of=bowl)
     assert sizes[0] == 1 and all(s % 16 == 0 for s in sizes[1:]), sizes
     assert found.cost < 0.02 * found.start_cost  # the F1 scan found the bowl's bottom (log 1.5 squared is 0.16)
+
+
+def test_a_set_is_replayed_once_per_fit_and_costs_the_same_bits_in_any_batch(monkeypatch):
+    # The memo (_polish.costs) rests on each set being one lane of the replay: its cost is the same bits alone or in a batch.
+    anchors, space = setup()
+    truth = np.array([getattr(TRUE, n) for n in DEFAULT_FIT]) / space.scales
+    thetas = truth[None, :] * np.exp(np.linspace(-0.05, 0.05, 16))[:, None]
+    batch = _polish.costs(anchors, space, thetas)
+    alone = [_polish.costs(anchors, replace(space), theta[None])[0] for theta in thetas]  # a fresh space: an empty memo
+    assert np.array_equal(batch, alone)
+    replayed = []
+    original = _polish.replay
+    monkeypatch.setattr(_polish, "replay", lambda vectors, *args, **kw: replayed.append(len(vectors)) or original(vectors, *args, **kw))
+    assert np.array_equal(_polish.costs(anchors, space, thetas[::-1]), batch[::-1]) and replayed == []
+    moved = np.vstack([thetas[:3], truth * 1.1, truth * 1.1])
+    assert np.array_equal(_polish.costs(anchors, space, moved)[:3], batch[:3]) and replayed == [1]  # the new set once

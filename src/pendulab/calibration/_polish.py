@@ -11,7 +11,7 @@ log gives the state (:class:`Anchors`): :func:`polish`, and beside it :func:`sca
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -319,6 +319,11 @@ class Space:
     lower: np.ndarray
     upper: np.ndarray
     prior: tuple[np.ndarray, float] | None = None
+    _memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def memo(self, logs: list[Anchors]) -> dict[bytes, float]:
+        """The costs replayed so far on ``logs`` by their sets' bytes (the logs kept with them: their ids stay theirs)."""
+        return self._memo.setdefault(tuple(map(id, logs)), (logs, {}))[1]
 
     def vectors(self, thetas: np.ndarray) -> np.ndarray:
         """Full parameter vectors ``(m, n_params)`` for scaled values ``(m, n)``."""
@@ -351,9 +356,18 @@ class Space:
 
 
 def costs(logs: list[Anchors], space: Space, thetas: np.ndarray) -> np.ndarray:
-    """The replay cost (sum of squared weighted errors) of each of ``thetas`` ``(m, n)``; a failed replay costs 1e6 per error."""
-    R = np.nan_to_num(space.residuals(logs, np.atleast_2d(thetas)), nan=1e6)
-    return np.einsum("ij,ij->i", R, R)
+    """The replay cost (sum of squared weighted errors) of each of ``thetas`` ``(m, n)``; a failed replay costs 1e6 per error.
+
+    A set already replayed on ``logs`` is not replayed again (:meth:`Space.memo`): a scan's second round where nothing
+    moved, a valley's own point. Its cost is the same bits: each set is one lane of the replay, whatever its batch.
+    """
+    thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+    memo, keys = space.memo(logs), [row.tobytes() for row in thetas]
+    new = list(dict.fromkeys(k for k in keys if k not in memo))
+    if new:
+        R = np.nan_to_num(space.residuals(logs, np.array([np.frombuffer(k) for k in new])), nan=1e6)
+        memo.update(zip(new, np.einsum("ij,ij->i", R, R)))
+    return np.array([memo[k] for k in keys])
 
 
 #: Scaled together in the common-scale direction: the gain, the forces and the drags together change
@@ -474,8 +488,7 @@ def polish(
 
     def cost_of(thetas: np.ndarray) -> np.ndarray:
         done["samples"] += thetas.shape[0] * n_samples
-        R = space.residuals(logs, thetas)
-        return np.einsum("ij,ij->i", R, R)
+        return costs(logs, space, thetas)
 
     theta = project(np.asarray(theta, dtype=float).copy())
     cost = start_cost = float(cost_of(theta[None])[0])
@@ -508,11 +521,11 @@ def polish(
         diagonal = [si * size[i] * E[i] + sj * size[j] * E[j] for i, j in pairs for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
         trials = np.array([project(theta + m) for m in np.vstack([np.diag(size), -np.diag(size), *diagonal, momentum])])
         replays += 1
-        costs = cost_of(trials)
-        best = int(np.argmin(costs))
-        if costs[best] < cost * (1 - 1e-6):
+        tried = cost_of(trials)
+        best = int(np.argmin(tried))
+        if tried[best] < cost * (1 - 1e-6):
             momentum = trials[best] - theta
-            theta, cost = trials[best], float(costs[best])
+            theta, cost = trials[best], float(tried[best])
         else:
             momentum = np.zeros(n)
             radius /= 3.0

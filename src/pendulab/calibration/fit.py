@@ -34,7 +34,8 @@ estimate, :func:`_voltage_shift`).
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
 (each rest of the cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state
-estimate); the RMS and largest position error are reported and stored in the calibration file.
+estimate); the RMS and largest position error are reported and stored in the calibration file. A few
+stretches whose replay diverges (a breakaway that a hair of drive decides) are named and left out (:data:`DIVERGED_SHARE`).
 ``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than
 :attr:`FitResult.forward_limit`.
 
@@ -272,6 +273,26 @@ FORWARD_LIMIT_STEPS = 20.0
 #: on a slow-ramp log the search stopped with B folded into Beq (Beq +780 %, 4.5 steps) and the profile there
 #: called Beq determined to a few per cent; fits that found the log's own answer replay within 0.9 to 2.5.
 CONFIDENT_STEPS = 3.0
+
+
+#: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a
+#: hair of drive decides. On a 300 s log of random steps with 10 mV of voltage noise the rig's true values diverge in
+#: a few stretches (1.2 % of the samples, by up to 95 mm) and replay the others within 1.1 steps. Up to this share of
+#: the samples such stretches are named and left out of the check (:func:`_diverged`); more, and they count.
+DIVERGED_SHARE = 0.05
+
+
+def _diverged(errors: np.ndarray, stretch: np.ndarray, limit: float) -> np.ndarray:
+    """The samples of the stretches (``stretch``: each error's) whose RMS error exceeds ``limit`` (or is not finite),
+    if they are at most :data:`DIVERGED_SHARE` of the samples; else none.
+
+    >>> stretch = np.repeat([0, 1, 2], [60, 37, 3])
+    >>> int(_diverged(np.where(stretch == 2, 1.0, 0.0), stretch, 0.5).sum()), int(_diverged(np.where(stretch == 1, 1.0, 0.0), stretch, 0.5).sum())
+    (3, 0)
+    """
+    rms = np.sqrt(np.bincount(stretch, errors**2) / np.maximum(np.bincount(stretch), 1))
+    out = ~(rms <= limit)[stretch]
+    return out if out.mean() <= DIVERGED_SHARE else np.zeros_like(out)
 
 
 def _noise_level(x: np.ndarray) -> float:
@@ -663,8 +684,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         trial = theta_opt.copy()
         trial[kept] = setup.theta0[kept]
         trial = space.project(trial)
-        r_trial = space.residuals(searched, trial[None])[0]
-        if float(r_trial @ r_trial) <= answer.polished.cost + prof.threshold:
+        if float(_polish.costs(searched, space, trial[None])[0]) <= answer.polished.cost + prof.threshold:
             theta_opt = trial
         else:  # flat around the answer, but not back at the start: the fitted value stays, bounded by nothing known
             prof = replace(prof, status=tuple(_polish.BOUNDED if j in kept else s_ for j, s_ in enumerate(prof.status)))
@@ -707,7 +727,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
-    curves, forward_errors, regimes = [], [], []
+    curves, forward_errors, regimes, stretches = [], [], [], []
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(candidate.whole, replays):
         states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
@@ -716,15 +736,26 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         log, used = e.log, e.used
         curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
         forward_errors.append(simulated - log.x[:used])
-    forward = np.concatenate(forward_errors)
-    forward_rms = float(np.sqrt(np.mean(forward**2))) if np.all(np.isfinite(forward)) else math.inf
-    forward_max = float(np.max(np.abs(forward))) if np.all(np.isfinite(forward)) else math.inf
+        stretches.append(np.searchsorted(a.segments, np.arange(used), side="right") - 1 + sum(len(r.segments) for r in replays[: len(curves) - 1]))
+    forward, stretch = np.concatenate(forward_errors), np.concatenate(stretches)
+    left_out = _diverged(forward, stretch, FORWARD_LIMIT_STEPS * setup.step)
+    counted = forward[~left_out]
+    forward_rms = float(np.sqrt(np.mean(counted**2))) if np.all(np.isfinite(counted)) else math.inf
+    forward_max = float(np.max(np.abs(counted))) if np.all(np.isfinite(counted)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
+    diverged_note = ""
+    if left_out.any():
+        k, source = int(np.argmax(left_out)), np.repeat([c.source for c in curves], [c.t.size for c in curves])
+        diverged_note = (
+            f"the replay diverges in {np.unique(stretch[left_out]).size} of {stretch[-1] + 1} stretches between restarts ({left_out.mean():.1%} "
+            f"of the samples; the first at t = {np.concatenate([c.t for c in curves])[k]:.2f} s in {source[k]}): a breakaway that a hair of "
+            "drive decides (a noisy voltage, a force at its threshold); the check counts the other stretches"
+        )
 
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, allowed_scaled, scales)}
     status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
     status, uncertainty, allowed, miss_note = confidence_of(status, uncertainty, allowed, forward_rms, setup.step)
-    confidence = "; ".join(note for note in (miss_note, regime_note) if note)
+    confidence = "; ".join(note for note in (diverged_note, miss_note, regime_note) if note)
     if confidence:
         setup.progress(confidence)
     return FitResult(
