@@ -235,6 +235,11 @@ def test_a_stretch_that_diverges_is_named_and_left_out_of_the_check():
     V = log.V.copy()
     V[4432:4666] = 0.0  # between two rests
     result = fit_parameters([replace(log, V=V)], TRUE, fit=("Beq", "force_gain"), start="given")
+    # Three such stretches (8.6 % of the log) count: the answer misses, and the refusal says where (not what to record).
+    for first, end in ((4967, 5368), (10573, 11001)):
+        V[first:end] = 0.0
+    with pytest.raises(FitRejected, match=r"^the logs determine none .*misses them by \d+ encoder steps, worst in .* around t = "):
+        fit_parameters([replace(log, V=V)], TRUE, fit=("Beq", "force_gain"), start="given")
     assert result.forward_ok and result.forward_rms < 1.5 * TRUE.q_x  # measured 0.99 steps without the stretch
     assert re.search(r"the replay diverges in \d+ of \d+ stretches .*the first at t = 4\.4\d s", result.confidence)
     assert all(result.determination[n] == "determined" and abs(result.values[n] / getattr(TRUE, n) - 1) < 0.02 for n in result.names)

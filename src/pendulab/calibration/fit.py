@@ -690,11 +690,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
             prof = replace(prof, status=tuple(_polish.BOUNDED if j in kept else s_ for j, s_ in enumerate(prof.status)))
     values = setup.values(theta_opt)
     params = params0.with_values(**values)
-    if _polish.DETERMINED not in prof.status:
-        raise FitRejected(
-            "the logs determine none of the fitted parameters (the replay is as good over a factor of two of each); record "
-            f"motion that shows them: {RECORD_INSTEAD}; no calibration written"
-        )
     uncertainty = prof.sigma.copy()
     # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
     # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
@@ -758,7 +753,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     confidence = "; ".join(note for note in (diverged_note, miss_note, regime_note) if note)
     if confidence:
         setup.progress(confidence)
-    return FitResult(
+    result = FitResult(
         names=names,
         values=values,
         initial={n: float(v) for n, v in zip(names, start_values)},
@@ -781,6 +776,12 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         forward_max=forward_max,
         encoder_step=setup.step,
     )
+    if _polish.DETERMINED not in prof.status:
+        # A replay that misses (stretches diverged beyond DIVERGED_SHARE) flattens the profile: say where, not what to record.
+        why = (f"the replay misses them by {forward_rms / setup.step:.0f} encoder steps, {result.where_it_misses()}; check the logs there"
+               if not result.forward_ok else f"the replay is as good over a factor of two of each; record motion that shows them: {RECORD_INSTEAD}")
+        raise FitRejected(f"the logs determine none of the fitted parameters ({why}); no calibration written")
+    return result
 
 
 # ---------------------------------------------------------------------- the fit
