@@ -108,6 +108,14 @@ def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
         "against V": (swing(-1.0, 1.0), "V or x has the wrong sign"),
         "x from the track's end": (swing(1.0, 1.0, x_offset=0.5), "give x from the track's centre"),
         "first step": ("t,V,x\n-0.0004,0,0\n" + swing(1.0, 1.0).split("\n", 2)[2], "the sample period varies from 1 to 1.4 ms"),
+        # What a rig's log may carry: missing samples, a lost encoder count, the pendulum left on (helper's audit).
+        "samples missing": ("".join(line + "\n" for k, line in enumerate(swing(1.0, 1.0).splitlines()) if not 301 <= k <= 310),
+                            "(the most off, 11 ms, after t = 0.299 s); split the log where samples are missing"),
+        "x jumps": ("t,V,x\n" + "".join(f"{t_},{V_},{float(x_) + (0.02 if k >= 300 else 0.0):.6g}\n"
+                                       for k, (t_, V_, x_) in enumerate(line.split(",") for line in swing(1.0, 1.0).splitlines()[1:])),
+                    "x jumps by 20 mm after t = 0.299 s"),
+        "pendulum on": ("t,V,x,alpha\n" + "".join(f"{line},{0.1 * math.sin(k / 50):.4f}\n" for k, line in enumerate(swing(1.0, 1.0).splitlines()[1:])),
+                        "alpha swings over 0.2 rad: the pendulum is on the cart; fit with its model (--pendulum long or short)"),
     }
     paths = {}
     for i, (name, (text, words)) in enumerate(cases.items()):
@@ -128,6 +136,11 @@ def test_fit_malformed_logs_one_line_exit_2_nothing_written(capsys, tmp_path):
         assert status == (3 if name == "never moves" else 2), name
         assert words in err and err.count("\n") == 1 and err.startswith("pendulab: error:"), (name, err)
         assert only_file(out_dir) == [], name
+    # One dead log among several: leave it out.
+    good = logs / "good.csv"
+    good.write_text(swing(1.0, 1.0))
+    status, _, err = run(capsys, "fit", str(good), str(bad_logs(logs)["never moves"][0]), "--out", str(out_dir / "fit.json"))
+    assert status == 3 and "never moves" in err and "leave it out, or record" in err and only_file(out_dir) == [], err
 
 
 def test_fit_bad_options(capsys, calibrated, tmp_path):

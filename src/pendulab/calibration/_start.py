@@ -29,6 +29,7 @@ from typing import Sequence
 import numpy as np
 
 from pendulab.calibration.logs import RampLog
+from pendulab.errors import ParameterError
 from pendulab.model.parameters import PlantParameters
 
 #: Smoothing window for speed and acceleration (s).
@@ -172,7 +173,13 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
             pushed = slipping_force(logs, params0.with_values(force_gain=gain, Beq=values["Beq"]), slip[0], slip[1])
             if pushed is not None:
                 values["F2"] = max(values.get("F2", params0.F2), pushed)
-    return params0.with_values(**values)
+    start = params0
+    for name, value in values.items():  # an estimate outside the plant's range (a log it misreads) is left out
+        try:
+            start = start.with_values(**{name: value})
+        except ParameterError:
+            continue
+    return start
 
 
 def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:

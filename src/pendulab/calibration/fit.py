@@ -278,7 +278,8 @@ CONFIDENT_STEPS = 3.0
 #: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a
 #: hair of drive decides. On a 300 s log of random steps with 10 mV of voltage noise the rig's true values diverge in
 #: a few stretches (1.2 % of the samples, by up to 95 mm) and replay the others within 1.1 steps. Up to this share of
-#: the samples such stretches are named and left out of the check (:func:`_diverged`); more, and they count.
+#: the samples such stretches are named and left out of the check (:func:`_diverged`); more, and they count. One
+#: stretch may be 3 % of a short log (random steps on the unseen rig with 10 mV, 16 s: 1 of 27 stretches).
 DIVERGED_SHARE = 0.05
 
 
@@ -396,6 +397,11 @@ RECORD_INSTEAD = (
 
 #: The coarsest sample period (s) the fit takes: a rig's log is sampled at 1 kHz or so; 1 s is a time in milliseconds.
 MAX_PERIOD = 0.05
+#: A cart logged faster than this (m/s, from one sample to the next) jumped: a lost encoder count or missing samples
+#: (the IP02 tops out near 1.5 m/s at 10 V; a one-sample 3 mm glitch at 1 kHz, 3 m/s, still fits).
+MAX_SPEED = 5.0
+#: A logged pendulum angle swinging over more than this (rad) is a pendulum on the cart (a cart alone logs a still or absent angle).
+ALPHA_SWINGS = 0.05
 
 
 def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samples: Callable[[RampLog], int]) -> None:
@@ -412,7 +418,9 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
             )
         steps = np.diff(log.t)
         if np.max(np.abs(steps - log.period)) > 0.1 * log.period:
-            raise CalibrationError(f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms; resample it to a fixed period")
+            k = int(np.argmax(np.abs(steps - log.period)))
+            raise CalibrationError(f"{where}: the sample period varies from {np.min(steps) * 1e3:.3g} to {np.max(steps) * 1e3:.3g} ms (the most "
+                                   f"off, {steps[k] * 1e3:.3g} ms, after t = {log.t[k]:.6g} s); split the log where samples are missing, or resample it to a fixed period")
         if log.period > MAX_PERIOD:
             raise CalibrationError(f"{where}: the sample period is {log.period:g} s; if t is in milliseconds, give it in seconds "
                                    f"(the fit needs at least {1 / MAX_PERIOD:.0f} samples a second; a rig logs about 1000)")
@@ -422,12 +430,16 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
         if np.max(np.abs(log.x)) > 1.05 * track / 2:  # the replay's cart would sit at an end stop
             raise CalibrationError(f"{where}: x reaches {log.x[np.argmax(np.abs(log.x))]:.3g} m, beyond the track's ends (+-{track / 2:.2g} m "
                                    "from its centre, where x = 0); give x from the track's centre")
+        speeds = np.abs(np.diff(log.x)) / log.period
+        if np.max(speeds) > MAX_SPEED:
+            k = int(np.argmax(speeds))
+            raise CalibrationError(f"{where}: x jumps by {abs(log.x[k + 1] - log.x[k]) * 1e3:.3g} mm after t = {log.t[k]:.6g} s ({speeds[k]:.3g} m/s, "
+                                   f"faster than any cart moves): the encoder lost count or samples are missing there; repair the log or cut it there")
         if np.max(np.abs(log.V)) > 3 * params0.V_max:
             raise CalibrationError(f"{where}: V reaches {np.max(np.abs(log.V)):.4g} V, the amplifier gives at most {params0.V_max:g} V; give V in volts")
         if np.ptp(log.x) < 1e-4:
-            raise FitRejected(
-                f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um), so the log determines nothing; record {RECORD_INSTEAD}"
-            )
+            raise FitRejected(f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um), so the log determines nothing; "
+                              f"{'leave it out, or ' if len(logs) > 1 else ''}record {RECORD_INSTEAD}")
         if np.ptp(log.V) <= 1e-3 * max(1.0, float(np.max(np.abs(log.V)))):
             raise FitRejected(
                 f"{where}: the voltage is constant ({float(np.mean(log.V)):.3g} V), so the force gain, Beq and the friction "
@@ -437,6 +449,9 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
             if log.alpha is None:
                 raise CalibrationError(f"{where} has no alpha column; fitting with a pendulum needs the logged angle (or use --pendulum none)")
             continue
+        if log.alpha is not None and np.ptp(log.alpha) > ALPHA_SWINGS:
+            raise CalibrationError(f"{where}: alpha swings over {np.ptp(log.alpha):.2g} rad: the pendulum is on the cart; fit with its model "
+                                   "(--pendulum long or short), or the fit takes its swing for the cart's friction")
         with np.errstate(invalid="ignore", divide="ignore"):  # a cart moving at one speed throughout: no correlation (nan)
             along = np.corrcoef(log.V[:-1], np.diff(log.x))[0, 1]
         if along < -0.3:  # the cart alone goes where V pushes it
@@ -659,13 +674,17 @@ def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
 
     The motor saw neither: the gap is a floor of those parameters' uncertainty. On the heavy rig's triangle wave with
     10 mV the answer's scale was 3.5 % low and reported to +-0.8 %; the logged voltage's best scale lies 2 % higher.
-    Two batched scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours).
+    Two batched scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours). No floor (0) where
+    the first has its least cost at an end: the logged voltage's replay does not follow the logs (on a 10 min log with
+    10 mV it diverged in a stretch, its cost flat in the scale, and every scaled value's uncertainty was floored at 12 %).
     """
     logged = _pieces_of(setup, answer.candidate.logged, answer.candidate.whole)
     centre, span = 0.0, 0.1
-    for _ in range(2):
+    for first in (True, False):
         X = centre + np.linspace(-span, span, SCAN_POINTS)
         c = _polish.costs(logged, setup.space, np.array([_polish.moved(setup.space, theta, "scale", x) for x in X]))
+        if first and int(np.argmin(c)) in (0, SCAN_POINTS - 1):
+            return 0.0
         centre, span = float(X[int(np.argmin(c))]), 2 * span / (SCAN_POINTS - 1)
     return abs(centre)
 
@@ -722,12 +741,11 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
-    curves, forward_errors, regimes, stretches = [], [], [], []
+    curves, forward_errors, replayed, stretches = [], [], [], []
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(candidate.whole, replays):
-        states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]
-        simulated = np.r_[a.x0[0], states[:, 0]]
-        regimes.append(slip_shares(params, a.V, states))
+        replayed.append(_replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0])
+        simulated = np.r_[a.x0[0], replayed[-1][:, 0]]
         log, used = e.log, e.used
         curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
         forward_errors.append(simulated - log.x[:used])
@@ -735,6 +753,9 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     forward, stretch = np.concatenate(forward_errors), np.concatenate(stretches)
     left_out = _diverged(forward, stretch, FORWARD_LIMIT_STEPS * setup.step)
     counted = forward[~left_out]
+    # Where the replay moves the cart, in the stretches it follows (one that diverged may race beyond the slip region).
+    kept = np.split(~left_out, np.cumsum([states.shape[0] + 1 for states in replayed])[:-1])
+    regimes = [slip_shares(params, a.V[k[1:]], states[k[1:]]) for a, states, k in zip(replays, replayed, kept)]
     forward_rms = float(np.sqrt(np.mean(counted**2))) if np.all(np.isfinite(counted)) else math.inf
     forward_max = float(np.max(np.abs(counted))) if np.all(np.isfinite(counted)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
@@ -743,8 +764,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         k, source = int(np.argmax(left_out)), np.repeat([c.source for c in curves], [c.t.size for c in curves])
         diverged_note = (
             f"the replay diverges in {np.unique(stretch[left_out]).size} of {stretch[-1] + 1} stretches between restarts ({left_out.mean():.1%} "
-            f"of the samples; the first at t = {np.concatenate([c.t for c in curves])[k]:.2f} s in {source[k]}): a breakaway that a hair of "
-            "drive decides (a noisy voltage, a force at its threshold); the check counts the other stretches"
+            f"of the samples; the first at t = {np.concatenate([c.t for c in curves])[k]:.2f} s in {source[k]}), left out of the check: a breakaway "
+            "that a hair of drive decides does that (a noisy voltage, a force at its threshold), and so do values that are off there"
         )
 
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, allowed_scaled, scales)}
