@@ -741,7 +741,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
-    curves, forward_errors, replayed, stretches = [], [], [], []
+    curves, forward_errors, replayed, stretches, n_stretches = [], [], [], [], 0
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(candidate.whole, replays):
         replayed.append(_replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0])
@@ -749,7 +749,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         log, used = e.log, e.used
         curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
         forward_errors.append(simulated - log.x[:used])
-        stretches.append(np.searchsorted(a.segments, np.arange(used), side="right") - 1 + sum(len(r.segments) for r in replays[: len(curves) - 1]))
+        stretches.append(n_stretches + np.searchsorted(a.segments, np.arange(used), side="right") - 1)  # each sample's, between restarts
+        n_stretches += len(a.segments)
     forward, stretch = np.concatenate(forward_errors), np.concatenate(stretches)
     left_out = _diverged(forward, stretch, FORWARD_LIMIT_STEPS * setup.step)
     counted = forward[~left_out]
@@ -763,7 +764,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     if left_out.any():
         k, source = int(np.argmax(left_out)), np.repeat([c.source for c in curves], [c.t.size for c in curves])
         diverged_note = (
-            f"the replay diverges in {np.unique(stretch[left_out]).size} of {stretch[-1] + 1} stretches between restarts ({left_out.mean():.1%} "
+            f"the replay diverges in {np.unique(stretch[left_out]).size} of {n_stretches} stretches between restarts ({left_out.mean():.1%} "
             f"of the samples; the first at t = {np.concatenate([c.t for c in curves])[k]:.2f} s in {source[k]}), left out of the check: a breakaway "
             "that a hair of drive decides does that (a noisy voltage, a force at its threshold), and so do values that are off there"
         )
