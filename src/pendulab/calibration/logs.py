@@ -202,11 +202,12 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
     t_name = _pick(TIME_NAMES, available)
     v_name = _pick(VOLTAGE_NAMES if "voltage" not in available else ("voltage",), available)
     x_name = _pick(POSITION_NAMES, available)
+    accepted = {"t": TIME_NAMES, "V": VOLTAGE_NAMES, "x": POSITION_NAMES}
     missing = [label for label, name in (("t", t_name), ("V", v_name), ("x", x_name)) if name is None]
     if missing:
         raise CalibrationError(
-            f"log {path} has no column {', '.join(missing)} (found: {', '.join(available) or 'none'}); "
-            "a log needs columns t, V, x (s, V, m)"
+            f"log {path} has no column {', '.join(missing)} (found: {', '.join(available) or 'none'}); a log needs columns t, V, x "
+            f"(s, V, m): rename the column in the header ({'; '.join(f'{m} is read from ' + ', '.join(accepted[m][:-1]) + ' or ' + accepted[m][-1] for m in missing)})"
         )
     a_name = _pick(ANGLE_PREFERRED, available)
     assert t_name and v_name and x_name
