@@ -120,6 +120,18 @@ def test_a_fit_that_cannot_reproduce_the_log_exits_3_and_writes_no_calibration(c
     # It says where: the log, the time and the signal the replay misses worst.
     where = re.search(r"worst in (\S+) around t = ([\d.]+) s: the cart position x off by [\d.]+ mm RMS", err)
     assert where and where.group(1).endswith("ramp_5s.csv") and 0.0 <= float(where.group(2)) <= 5.0, err
+    assert "give longer or richer logs" in err  # the search saw the whole log
+
+
+def test_a_long_log_searched_on_pieces_that_misses_says_to_fit_a_part(capsys, ramp_test_fit):
+    # Slow ramps of 2 minutes: the search saw 20 s of pieces and the whole log's replay missed (helper's audit:
+    # 'give longer or richer logs' was the advice); the answer of the log's own fit, made to miss, says what to do.
+    log, path, result = ramp_test_fit
+    missed = replace(result, forward_rms=50 * result.encoder_step, searched_seconds=log.duration / 3)
+    with recorded_fit(missed):
+        status, _, err = run(capsys, "fit", str(path))
+    assert status == 3 and err.count("\n") == 1
+    assert f"fit a part of about {log.duration / 3:.0f} s of them (the search saw that much of their {log.duration:.0f} s" in err, err
 
 
 def test_a_constant_voltage_cannot_identify_the_parameters(capsys, tmp_path):

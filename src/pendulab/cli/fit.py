@@ -73,15 +73,17 @@ def run(args: argparse.Namespace) -> int:
     )
     print(result.summary())
     if not result.forward_ok:
+        total = sum(log.duration for log in logs)
         if plot:  # the picture of the mismatch helps to see why; no calibration is written
             plot_fit(result, plot)
             print(f"plot written to {plot}")
         raise FitRejected(
             f"the fitted values do not reproduce the logs: a forward simulation misses them by {result.forward_rms * 1e3:.3g} mm RMS "
             f"({result.forward_rms / max(result.encoder_step, 1e-12):.0f} encoder steps; accepted up to {result.forward_limit * 1e3:.3g} mm), "
-            f"{result.where_it_misses()}; "
-            "no calibration written. Check the logs (units, --pendulum, the voltage column is the applied voltage), "
-            "give longer or richer logs (ramps in both directions, steps), or start from --calibration"
+            f"{result.where_it_misses()}; no calibration written. Check the logs (units, --pendulum, the voltage column is the applied voltage), "
+            + (f"fit a part of about {result.searched_seconds:.0f} s of them (the search saw that much of their {total:.0f} s, where the cart stops "
+               "and starts most)" if result.searched_seconds < 0.95 * total else "give longer or richer logs (ramps in both directions, steps)")
+            + ", or start from --calibration"
         )
 
     if out:
