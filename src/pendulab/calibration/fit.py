@@ -766,14 +766,15 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     left_out = _diverged(forward, stretch, FORWARD_LIMIT_STEPS * setup.step)
     counted = forward[~left_out]
     # Where the replay moves the cart, in the stretches it follows (one that diverged may race beyond the slip region).
-    kept = np.split(~left_out, np.cumsum([states.shape[0] + 1 for states in replayed])[:-1])
+    sizes = [c.t.size for c in curves]  # each log's samples: its replayed states and its first
+    kept = np.split(~left_out, np.cumsum(sizes)[:-1])
     regimes = [slip_shares(params, a.V[k[1:]], states[k[1:]]) for a, states, k in zip(replays, replayed, kept)]
     forward_rms = float(np.sqrt(np.mean(counted**2))) if np.all(np.isfinite(counted)) else math.inf
     forward_max = float(np.max(np.abs(counted))) if np.all(np.isfinite(counted)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
     diverged_note = ""
     if left_out.any():
-        k, source = int(np.argmax(left_out)), np.repeat([c.source for c in curves], [c.t.size for c in curves])
+        k, source = int(np.argmax(left_out)), np.repeat([c.source for c in curves], sizes)
         diverged_note = (
             f"the replay diverges in {np.unique(stretch[left_out]).size} of {n_stretches} stretches between restarts ({left_out.mean():.1%} "
             f"of the samples; the first at t = {np.concatenate([c.t for c in curves])[k]:.2f} s in {source[k]}), left out of the check: a breakaway "
