@@ -24,6 +24,9 @@ EXPRESSIONS = [
     ca.logic_and(x, y), ca.logic_or(x, y), ca.logic_not(x), ca.if_else(x < y, x, y * 3.0), ca.if_else(x, y, 0.5),
     ca.fabs(x), ca.fmin(x, y), ca.fmax(x, y), ca.sign(x), ca.sin(x), ca.cos(x), ca.sqrt(x), ca.floor(x), ca.exp(x),
     ca.tanh(x), ca.atan2(x, y), x ** 3.5, x + 0.1,
+    # truths passed on between operations as lane masks, and a truth taken as a number
+    ca.logic_and(x < y, ca.logic_not(x == 0.5)), ca.logic_or(ca.logic_not(x <= y), y), ca.if_else(ca.logic_and(x, y < 1.0), x, -y),
+    (x < y) * 3.0 + x, ca.logic_not(ca.logic_not(x)) + 0.0,
 ]
 FUNCTION = ca.Function("f", [x, y], [ca.vertcat(*EXPRESSIONS)])
 DRIVER = r"""
