@@ -334,8 +334,9 @@ V1_SCATTER = 1.3
 WALK_GAIN = 0.01
 #: Above this replay RMS (encoder steps) the chosen answer goes through the evolution strategy (:func:`_evolved`),
 #: with each of these seeds while it still misses: on the sticky rig's chirp, stopped at 2.31 steps, six of seven
-#: seeds found 0.9-1.6 steps (the truth: 0.97), one none lower (15 CPU-s each).
-EVOLVE_ABOVE_STEPS = 1.5
+#: seeds found 0.9-1.6 steps (the truth: 0.97), one none lower (15 CPU-s each). The issue's bar (2 steps): from 1.5,
+#: two unjudged corpus fits gained 0.05 steps for 5 CPU-s each, and the 25 s bench log 0.3 steps for 5 of its 17 CPU-s.
+EVOLVE_ABOVE_STEPS = 2.0
 EVOLVE_SEEDS = (19, 20)
 #: Pattern-search steps of the polish, and the samples it may replay (parameter sets x samples; about 0.5 us each):
 #: ~700 sets over 20 s of log, a bound on its time that, unlike a clock, gives the same answer on a busy machine.
