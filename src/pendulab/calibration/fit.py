@@ -785,6 +785,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, allowed_scaled, scales)}
     status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
     status, uncertainty, allowed, miss_note = confidence_of(status, uncertainty, allowed, forward_rms, setup.step)
+    if miss_note and setup.with_pendulum:  # the closed loop's log of the long pendulum fitted as the short one misses by 3.7 steps
+        miss_note += "; or the pendulum is not the rig's: check which one the fit was given (pendulab fit --pendulum long|short)"
     confidence = "; ".join(note for note in (diverged_note, miss_note, regime_note) if note)
     if confidence:
         setup.progress(confidence)
