@@ -113,3 +113,18 @@ def test_a_log_that_starts_with_the_cart_moving_settles_its_first_state():
         assert abs(error) < WITHIN[name], (name, error)
     if result.determination["v2"] == "determined":
         assert abs(result.values["v2"] - TRUE.v2) < 3 * result.uncertainty["v2"]  # measured -0.3 % +- 1.2 %
+
+
+def test_a_log_whose_first_step_is_long_replays_at_its_median_period():
+    # The helper's audit (session 20): the replay took the period from the first two samples; a log whose first step
+    # was 4.5 % long fitted the force gain 8.4 % low, "determined" to 0.3 %, and exited 0.
+    from dataclasses import replace
+
+    from pendulab.calibration.synthetic import TEST_RIG
+
+    log = synthetic_log("random steps", TEST_RIG, duration=12.0, voltage_noise=0.0)
+    t = log.t.copy()
+    t[0] -= 0.045 * log.period
+    result = fit_parameters([replace(log, t=t)], PlantParameters.preset("none"))
+    for name in ("Beq", "force_gain"):  # measured -0.0 % and -0.0 % (with the first step: -8.4 % on the gain)
+        assert abs(result.values[name] / getattr(TEST_RIG, name) - 1) < 0.02, (name, result.values[name])

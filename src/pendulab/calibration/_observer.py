@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pendulab.calibration._polish import Anchors, Space, scan_directions
-from pendulab.calibration._replay import observe
+from pendulab.calibration._replay import observe, sample_period
 
 #: Observer bandwidths (rad/s), searched in turn: a wide basin first, then nearer the replay.
 OMEGAS = (150.0, 60.0)
@@ -72,7 +72,7 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
     vectors = space.vectors(np.atleast_2d(thetas))
     rows = []
     for a in logs:
-        period = float(a.t[1] - a.t[0])
+        period = sample_period(a.t)
         ny = a.measured.shape[1]
         predicted = observe(vectors, a.V, a.t, a.measured, a.x0, observer_gain(omega, period, outputs=ny), free=space.names)
         rows.append(((predicted - a.measured[None]) / a.sigma[None, None, :ny]).reshape(len(vectors), -1))

@@ -213,10 +213,16 @@ def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, .
     return free_idx, tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vector))
 
 
+def sample_period(t: np.ndarray) -> float:
+    """The step between the samples at times ``t``: their median step to 12 digits (a 1 kHz log's is 0.001 whatever
+    its times' rounding). Not the first step: a log whose first was 4.5 % long fitted the force gain 8 % low."""
+    return float(f"{np.median(np.diff(t)):.12g}") if len(t) > 1 else 1e-3
+
+
 def _key(vectors: np.ndarray, t: np.ndarray, free: Sequence[str] | None) -> tuple[tuple, np.ndarray, float]:
     """What :func:`replay` and :func:`observe` share: the key of the compiled step (sub-steps, free, fixed), the
     free parameters of every set (``(m, n_free)``, C order) and the sub-step."""
-    period = float(t[1] - t[0]) if len(t) > 1 else 1e-3
+    period = sample_period(t)
     n_sub = substeps(period, MAX_SUBSTEP)
     free_idx, fixed = _split(vectors[0], free)
     return (n_sub, free_idx, fixed), np.ascontiguousarray(vectors[:, free_idx]), period / n_sub
