@@ -22,6 +22,8 @@ from pendulab.model.parameters import PlantParameters
 #: A rest: the logged position stays within this many encoder steps (or 6 noise sigmas) for REST_WINDOW.
 REST_STEPS = 2.5
 REST_WINDOW = 0.02
+#: ... and for at least this many samples: at 100 Hz, 3 samples (30 ms) still held a cart breaking away at 38 mm/s.
+REST_SAMPLES = 4
 #: An upright pendulum's replay restarts from the state estimate this often (s).
 UNSTABLE_WINDOW = 0.25
 
@@ -52,13 +54,18 @@ class Anchors:
         return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments, self.denoised)
 
 
+def rest_samples(period: float) -> int:
+    """The samples a rest lasts at least (:data:`REST_WINDOW`, :data:`REST_SAMPLES`)."""
+    return max(REST_SAMPLES, int(round(REST_WINDOW / period)))
+
+
 def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple[int, int]]:
     """Rests of the cart, ``[(first, stop), ...]``: runs where the position stays put for :data:`REST_WINDOW`.
 
     In the lab's law a stuck cart is not quite still: friction cancels the motor's force, while
     ``Beq`` slows the speed it entered with (below ``v1``) only exponentially, over a time ``Mc/Beq``.
     """
-    w = max(3, int(round(REST_WINDOW / period)))
+    w = rest_samples(period)
     if len(x) <= w:
         return []
     windows = np.lib.stride_tricks.sliding_window_view(x, w)
@@ -78,7 +85,7 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
     restarts: dict[int, np.ndarray] = {}
     upright = with_pendulum and log.alpha is not None and float(np.median(np.abs(log.alpha))) < math.pi / 2
     if not with_pendulum:
-        w = max(3, int(round(REST_WINDOW / log.period)))
+        w = rest_samples(log.period)
         spans = rests(log.x[:used], step, float(sigma[0]), log.period)
         if spans and spans[0][0] == 0:
             # A log that starts at rest starts from the rest's line, not from a smoothed speed: a stuck

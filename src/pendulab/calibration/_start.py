@@ -114,11 +114,11 @@ def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None
     the cart broke away, the voltage reached just before it moved is an upper bound whether it rose
     slowly or jumped there. None where the logs show no such rest.
     """
-    from pendulab.calibration._polish import REST_WINDOW, rests
+    from pendulab.calibration._polish import rest_samples, rests
 
     held, broke = [], []
     for log in logs:
-        w = max(3, int(round(REST_WINDOW / log.period)))
+        w = rest_samples(log.period)
         noise = max(step / math.sqrt(12), 1e-6)
         for first, stop in rests(log.x, step, noise, log.period):
             inside = np.abs(log.V[first + w : max(first + w, stop - 2 * w)])

@@ -299,8 +299,12 @@ def _diverged(errors: np.ndarray, stretch: np.ndarray, limit: float) -> np.ndarr
 
 
 def _noise_level(x: np.ndarray) -> float:
-    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12)."""
-    return max(float(np.std(np.diff(x, 2))) / math.sqrt(6), encoder_step(x) / math.sqrt(12), 1e-6)
+    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12). Their spread is
+    the robust one (from the median) where the motion's own curvature inflates their standard deviation: at 100 Hz
+    it read 99 um for 10 um of noise, and the rests, within 6 of it, held a cart at 80 mm/s (no 1 kHz log's is lower)."""
+    d = np.diff(x, 2)
+    spread = min(float(np.std(d)), 1.4826 * float(np.median(np.abs(d - np.median(d)))))
+    return max(spread / math.sqrt(6), encoder_step(x) / math.sqrt(12), 1e-6)
 
 
 def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
