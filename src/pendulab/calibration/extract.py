@@ -180,21 +180,14 @@ def _find_pushes(log: RampLog) -> list[_Push]:
     pushes: list[_Push] = []
     for a in starts:
         first = V[a]
-        # The ramp-from-zero signature: V[a+j] = (j+1) V[a] until the target is reached.
-        n = min(5, len(V) - a)
-        if n < 3:
-            continue
-        expected = first * np.arange(1, n + 1)
-        actual = V[a : a + n]
-        ramping = np.abs(actual - expected) <= 0.02 * np.abs(expected) + 1e-9
-        if not ramping[:3].all():
+        # The ramp-from-zero signature: V[a+j] = (j+1) V[a] over the first three samples.
+        expected = first * np.arange(1, 4)
+        if len(V) - a < 3 or not np.all(np.abs(V[a : a + 3] - expected) <= 0.02 * np.abs(expected) + 1e-9):
             continue
         after = np.flatnonzero(off[a:])
         release = a + int(after[0]) if after.size else len(V)
         pushes.append(_Push(int(a), int(release), len(V), float(first / dt)))
-    return [
-        _Push(p.start, p.release, pushes[i + 1].start if i + 1 < len(pushes) else len(V), p.rate) for i, p in enumerate(pushes)
-    ]
+    return [replace(p, end=following.start) for p, following in zip(pushes, pushes[1:])] + pushes[-1:]  # the last ends with the log
 
 
 def _onset_voltage(t: np.ndarray, V: np.ndarray, x: np.ndarray, x_rest: float, direction: int, j: int, k: int) -> float:
@@ -415,8 +408,7 @@ def extract_friction(
             measured[name] = float(np.mean(values_))
             spread[name] = float(np.std(values_, ddof=1)) if len(values_) > 1 else 0.0
         elif name != "Beq":
-            measured[name] = getattr(params, name)
-            spread[name] = 0.0
+            measured[name], spread[name] = getattr(params, name), 0.0
             notes.append(f"{name} not observed (no coasting phase showed it); kept the nominal {measured[name]:g}")
     if measured["v1"] > measured["v2"]:
         measured["v1"] = measured["v2"]
@@ -455,8 +447,7 @@ def extract_friction(
         measured["F2"] = float(np.mean(F2_values))
         spread["F2"] = float(np.std(F2_values, ddof=1)) if len(F2_values) > 1 else 0.0
     else:
-        measured["F2"] = max(params.F2, measured["F1"])
-        spread["F2"] = 0.0
+        measured["F2"], spread["F2"] = max(params.F2, measured["F1"]), 0.0
         notes.append(f"F2 not observed (no probe left the drag regime by force); kept {measured['F2']:g} N as measured (>= F1)")
 
     raw = tuple(measured[n] for n in FRICTION_NAMES)
