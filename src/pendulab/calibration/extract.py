@@ -55,8 +55,9 @@ from typing import Any
 import numpy as np
 from scipy.optimize import OptimizeWarning, least_squares
 
-from pendulab.calibration.files import Calibration
+from pendulab.calibration.files import UNITS, Calibration
 from pendulab.calibration.logs import RampLog, encoder_step
+from pendulab.calibration.rig import NO_PENDULUM
 from pendulab.errors import CalibrationError
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
@@ -158,9 +159,8 @@ class FrictionEstimate:
     def summary(self) -> str:
         lines = []
         for name, value, measured in zip(FRICTION_NAMES, self.friction, self.measured):
-            unit = {"F1": "N", "F2": "N", "v1": "m/s", "v2": "m/s", "B": "kg/s"}[name]
             scaled = f" (measured {measured:.4g})" if name in ("F1", "F2") and self.mass_ratio != 1 else ""
-            lines.append(f"{name} = {value:.4g} ± {self.spread[name]:.2g} {unit}{scaled}  [n={self.counts[name]}]")
+            lines.append(f"{name} = {value:.4g} ± {self.spread[name]:.2g} {UNITS[name]}{scaled}  [n={self.counts[name]}]")
         return "\n".join(lines)
 
 
@@ -238,7 +238,7 @@ def _coast_distance(tau: np.ndarray, u0: float, lam0: float, lam_s: float, lam_c
     )
 
 
-def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc: float, b: float, Beq0: float, q: float):
+def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc: float, b: float, Beq0: float):
     """Fit ``[x0, u0, Beq, B, v2, v1]`` of the coasting motion; returns (values or None, rms)."""
     tau = t - t[0]
 
@@ -332,7 +332,7 @@ def extract_friction(
     """
     if not (isinstance(mass_ratio, (int, float)) and math.isfinite(mass_ratio) and mass_ratio > 0):
         raise CalibrationError(f"mass ratio {mass_ratio!r} must be a positive number")
-    params = (params or PlantParameters.preset("none")).with_values(Mp=0.0, Lp=0.0, lp=0.0, Ip=0.0, Bp=0.0)
+    params = (params or PlantParameters.preset("none")).with_values(**NO_PENDULUM)
     K, b = motor_constants(params)
     Mc = params.lumped_cart_mass
     where = f"log {log.source}" if log.source else "log"
@@ -382,7 +382,7 @@ def extract_friction(
         if e - r >= 50:
             pre = slice(max(push.start, r - 20), r + 1)
             u_guess = abs(np.polyfit(t[pre] - t[r], x[pre], 1)[0]) if r - pre.start >= 3 else 0.0
-            theta, rms = _fit_coast(t[r:e], x[r:e], direction, u_guess, Mc, b, params.Beq, q)
+            theta, rms = _fit_coast(t[r:e], x[r:e], direction, u_guess, Mc, b, params.Beq)
             if theta is not None and rms <= max(3 * q, 6 * noise, 2e-6):
                 _, u0, Beq, B, v2, v1 = (float(v) for v in theta)
                 values["Beq"] = Beq

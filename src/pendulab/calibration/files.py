@@ -51,7 +51,7 @@ VERSION = 1
 #: Optional fitted parameters a calibration file may hold beside the friction vector.
 FITTED_NAMES = ("Beq", "force_gain", "M_cart")
 _TOP_LEVEL = {"format", "version", "friction", "metadata", *FITTED_NAMES}
-_UNITS = {"F1": "N", "v1": "m/s", "F2": "N", "v2": "m/s", "B": "kg/s", "Beq": "N.s/m", "force_gain": "", "M_cart": "kg"}
+UNITS = {"F1": "N", "v1": "m/s", "F2": "N", "v2": "m/s", "B": "kg/s", "Beq": "N.s/m", "force_gain": "", "M_cart": "kg"}
 
 #: The packaged default file (a copy of ``calibration/default.json`` at the repository root).
 DEFAULT_CALIBRATION_PATH = Path(__file__).resolve().parent / "default.json"
@@ -150,7 +150,7 @@ class Calibration:
 
 def _number(name: str, value: Any, source: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise CalibrationError(f"{source}: {name}={value!r} is not a number; give a value in {_UNITS[name] or 'units of 1'}")
+        raise CalibrationError(f"{source}: {name}={value!r} is not a number; give a value in {UNITS[name] or 'units of 1'}")
     value = float(value)
     if not math.isfinite(value):
         raise CalibrationError(f"{source}: {name}={value} is not finite")

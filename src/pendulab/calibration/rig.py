@@ -26,7 +26,7 @@ from pendulab.errors import CalibrationError, FmuBuildError
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
 
 #: The pendulum's fields, zeroed for the cart alone.
-_NO_PENDULUM = {"Mp": 0.0, "Lp": 0.0, "lp": 0.0, "Ip": 0.0, "Bp": 0.0}
+NO_PENDULUM = {"Mp": 0.0, "Lp": 0.0, "lp": 0.0, "Ip": 0.0, "Bp": 0.0}
 
 
 class RigEnded(Exception):
@@ -114,7 +114,7 @@ class VirtualRig(Rig):
             if len(friction) != 5:
                 raise CalibrationError(f"the virtual rig's friction needs 5 numbers F1,v1,F2,v2,B, got {len(friction)}")
             params = params.with_values(**dict(zip(FRICTION_NAMES, friction)))
-        self.params = params.with_values(**_NO_PENDULUM)
+        self.params = params.with_values(**NO_PENDULUM)
         if not period > 0:
             raise CalibrationError(f"rig period {period} must be > 0 s")
         self.period = float(period)
