@@ -212,11 +212,7 @@ def trend_filter(y: np.ndarray, weight: float, tol: float = 1e-4, max_iter: int 
         return x[:-2] - 2 * x[1:-1] + x[2:]
 
     def DT(z: np.ndarray) -> np.ndarray:
-        out = np.zeros(n)
-        out[:-2] += z
-        out[1:-1] -= 2 * z
-        out[2:] += z
-        return out
+        return np.r_[z, 0.0, 0.0] - 2 * np.r_[0.0, z, 0.0] + np.r_[0.0, 0.0, z]
 
     def banded(diagonal: np.ndarray | float) -> np.ndarray:  # D D^T + diag, upper banded form
         ab = np.zeros((3, m))
@@ -446,11 +442,7 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                     # B acts only below v2: out of the trap "B = 0, Beq = the whole drag" the split
                     # lowers the cost only with a slip region the cart's speeds reach.
                     j = names.index("v2")
-                    extra = []
-                    for v2 in SLIP_SPEEDS:
-                        grid = trials.copy()
-                        grid[:, j] = v2 / space.scales[j]
-                        extra += [space.project(th) for th in grid]
+                    extra = [space.project(np.where(np.arange(len(th)) == j, v2 / space.scales[j], th)) for v2 in SLIP_SPEEDS for th in trials]
                     trials = np.vstack([trials, extra])
                 c = evaluate(trials)
                 replays += 1
