@@ -121,8 +121,7 @@ class _Run:
         for _ in range(self.steps(s.phase_timeout)):
             x = self.position
             if abs(x) <= s.centre_tolerance:
-                integral = 0.0
-                voltage = 0.0
+                integral = voltage = 0.0
                 if self.is_still():
                     self.note(f"centred at x={x * 1e3:.2f} mm")
                     return

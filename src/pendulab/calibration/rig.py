@@ -121,7 +121,7 @@ class VirtualRig(Rig):
         self.x0 = float(x0)
         if backend not in ("auto", "fmu", "casadi"):
             raise CalibrationError(f"unknown virtual rig backend {backend!r}; choose auto, fmu or casadi")
-        self._stepper: _FmuStepper | _CasadiStepper
+        self._stepper: _FmuStepper | _CasadiStepper | None = None
         if backend in ("auto", "fmu"):
             try:
                 self._stepper = _FmuStepper(self.params, self.period, progress)
@@ -129,9 +129,7 @@ class VirtualRig(Rig):
                 if backend == "fmu":
                     raise CalibrationError(f"cannot use the plant FMU for the virtual rig: {exc}") from None
                 warnings.warn(f"plant FMU unavailable ({exc}); the virtual rig steps the CasADi model instead", stacklevel=2)
-                self._stepper = _CasadiStepper(self.params, self.period)
-        else:
-            self._stepper = _CasadiStepper(self.params, self.period)
+        self._stepper = self._stepper or _CasadiStepper(self.params, self.period)
         self.backend = self._stepper.name
         self.description = f"virtual rig ({self.backend}, friction {list(self.params.friction)})"
         self._k = 0
@@ -170,10 +168,7 @@ class _FmuStepper:
 
     def reset(self, x0: float) -> float:
         start = {"x": x0, "xdot": 0.0, "alpha": 0.0, "alphadot": 0.0, "V": 0.0}
-        if self._live:
-            self._fmu.reset(0.0, start)
-        else:
-            self._fmu.setup(0.0, start)
+        (self._fmu.reset if self._live else self._fmu.setup)(0.0, start)
         self._live = True
         self._fmu.read(self._out)
         return self._out.values["Real"][0]
