@@ -234,13 +234,8 @@ class FitResult:
         lines = [f"{'name':<11}{'start':>11}{'fitted':>11}  {'± (1 sigma) or range':<22}the logs"]
         for name in self.names:
             status = self.determination.get(name, "determined")
-            low, high = self.allowed.get(name, (0.0, math.inf))
-            if status == "determined":
-                spread = f"± {self.uncertainty[name]:.2g}"
-            elif status == "bounded":
-                spread = _range_text(low, high)
-            else:
-                spread = "(start value kept)"
+            spread = (f"± {self.uncertainty[name]:.2g}" if status == "determined" else
+                      _range_text(*self.allowed.get(name, (0.0, math.inf))) if status == "bounded" else "(start value kept)")
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
             f"one-sample prediction RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
