@@ -17,9 +17,10 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from pendulab.errors import CalibrationError as CalibrationError  # light: no lazy import needed
+
 _EXPORTS = {
     "Calibration": "files",
-    "CalibrationError": None,
     "DEFAULT_CALIBRATION_PATH": "files",
     "default_calibration": "files",
     "load_calibration": "files",
@@ -39,14 +40,10 @@ _EXPORTS = {
     "plot_fit": "fit",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = sorted([*_EXPORTS, "CalibrationError"])
 
 
 def __getattr__(name: str) -> Any:
     if name not in _EXPORTS:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    if name == "CalibrationError":
-        from pendulab.errors import CalibrationError
-
-        return CalibrationError
     return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
