@@ -88,9 +88,7 @@ class Calibration:
     @property
     def values(self) -> dict[str, float]:
         """Every parameter this calibration sets, by plant-parameter name."""
-        values = dict(zip(FRICTION_NAMES, self.friction))
-        values.update({n: getattr(self, n) for n in FITTED_NAMES if getattr(self, n) is not None})
-        return values
+        return {**dict(zip(FRICTION_NAMES, self.friction)), **{n: getattr(self, n) for n in FITTED_NAMES if getattr(self, n) is not None}}
 
     def apply(self, params: PlantParameters) -> PlantParameters:
         """``params`` with the friction vector and the fitted parameters of this calibration.
@@ -106,7 +104,7 @@ class Calibration:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (see the module docstring)."""
-        fitted = {n: getattr(self, n) for n in FITTED_NAMES if getattr(self, n) is not None}
+        fitted = {n: v for n, v in self.values.items() if n in FITTED_NAMES}
         return {"format": FORMAT, "version": VERSION, "friction": dict(zip(FRICTION_NAMES, self.friction)), **fitted, "metadata": dict(self.metadata)}
 
     @classmethod
@@ -161,14 +159,10 @@ def _number(name: str, value: Any, source: str) -> float:
 
 def _validate(friction: Mapping[str, Any], fitted: Mapping[str, Any], source: str) -> dict[str, float]:
     checked = {n: _number(n, friction[n], source) for n in FRICTION_NAMES}
-    if checked["v1"] > checked["v2"]:
-        raise CalibrationError(
-            f"{source}: v1={checked['v1']:g} m/s is above v2={checked['v2']:g} m/s; the sticking speed v1 must not exceed v2"
-        )
-    if checked["F1"] > checked["F2"]:
-        raise CalibrationError(
-            f"{source}: F1={checked['F1']:g} N is above F2={checked['F2']:g} N; the breakaway force F1 must not exceed F2"
-        )
+    for low, high, what in (("v1", "v2", "the sticking speed"), ("F1", "F2", "the breakaway force")):
+        if checked[low] > checked[high]:
+            raise CalibrationError(f"{source}: {low}={checked[low]:g} {UNITS[low]} is above {high}={checked[high]:g} {UNITS[high]}; "
+                                   f"{what} {low} must not exceed {high}")
     for name in FITTED_NAMES:
         if fitted.get(name) is not None:
             checked[name] = _number(name, fitted[name], source)
@@ -242,15 +236,8 @@ def _load_mat(path: Path) -> Calibration:
             f"{source} is empty (variable {', '.join(sorted(numeric))} holds no numbers); "
             "save the friction vector [F1 v1 B unused] in it, or use a JSON calibration file"
         )
-
-    def as_vector(value: Any) -> np.ndarray | None:
-        array = np.asarray(value, dtype=float).ravel()
-        return array if array.size in (4, 5) else None
-
-    named = [k for k in numeric if "fric" in k.lower()]
-    candidates = [k for k in named if as_vector(numeric[k]) is not None]
-    if not candidates:
-        candidates = [k for k in numeric if as_vector(numeric[k]) is not None]
+    vectors = {k: np.asarray(v, dtype=float).ravel() for k, v in numeric.items() if v.size in (4, 5)}
+    candidates = [k for k in vectors if "fric" in k.lower()] or list(vectors)
     if not candidates:
         raise CalibrationError(
             f"{source} holds no friction vector: expected one variable with 4 numbers [F1 v1 B unused] "
@@ -261,8 +248,7 @@ def _load_mat(path: Path) -> Calibration:
             f"{source} holds several 4/5-number vectors ({', '.join(sorted(candidates))}); keep only the friction vector in it"
         )
     name = candidates[0]
-    vector = as_vector(numeric[name])
-    assert vector is not None
+    vector = vectors[name]
     metadata: dict[str, Any] = {"source": str(path), "mat_variable": name, "method": "old lab .mat file"}
     if len(vector) == 4:
         F1, v1, B = (float(v) for v in vector[:3])
