@@ -197,25 +197,17 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
         raise CalibrationError(f"log {path} does not exist")
     columns = _read_mat(path) if path.suffix.lower() == ".mat" else _read_csv(path)
     available = list(columns)
-    t_name = _pick(TIME_NAMES, available)
-    v_name = _pick(VOLTAGE_NAMES if "voltage" not in available else ("voltage",), available)
-    x_name = _pick(POSITION_NAMES, available)
+    picked = {"t": _pick(TIME_NAMES, available), "V": _pick(VOLTAGE_NAMES if "voltage" not in available else ("voltage",), available),
+              "x": _pick(POSITION_NAMES, available)}
     accepted = {"t": TIME_NAMES, "V": VOLTAGE_NAMES, "x": POSITION_NAMES}
-    missing = [label for label, name in (("t", t_name), ("V", v_name), ("x", x_name)) if name is None]
+    missing = [label for label, name in picked.items() if name is None]
     if missing:
         raise CalibrationError(
             f"log {path} has no column {', '.join(missing)} (found: {', '.join(available) or 'none'}); a log needs columns t, V, x "
             f"(s, V, m): rename the column in the header ({'; '.join(f'{m} is read from ' + ', '.join(accepted[m][:-1]) + ' or ' + accepted[m][-1] for m in missing)})"
         )
     a_name = _pick(ANGLE_PREFERRED, available)
-    assert t_name and v_name and x_name
-    return RampLog(
-        t=columns[t_name],
-        V=columns[v_name],
-        x=columns[x_name],
-        alpha=columns[a_name] if a_name else None,
-        source=str(path),
-    )
+    return RampLog(**{label: columns[name] for label, name in picked.items()}, alpha=columns[a_name] if a_name else None, source=str(path))
 
 
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
