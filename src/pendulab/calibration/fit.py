@@ -480,7 +480,7 @@ class _Setup:
     scales: np.ndarray  # theta = value / scale
     theta0: np.ndarray  # the start, scaled
     space: _polish.Space
-    interval: float  # between the state estimates (s)
+    stride: Callable[[RampLog], int]  # samples between the state estimates of a log (:func:`_stride`)
     pieces: list[tuple[RampLog, int, int]]  # what the searches see of long logs (:func:`_pieces`)
     voltage_noise: float  # the logged voltage's sample noise (V; the largest over the logs)
     progress: Callable[[str], None]
@@ -501,10 +501,6 @@ class _Setup:
         threshold is no better known than that noise's drive, and the common scale no better than the two
         estimates of the voltage agree (:func:`_voltage_shift`)."""
         return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
-
-    def stride(self, log: RampLog) -> int:
-        """Samples between the state estimates of ``log``."""
-        return _stride(log, self.interval)
 
     def used(self, log: RampLog) -> int:
         """The samples of ``log`` the fit sees: whole intervals between state estimates."""
@@ -727,12 +723,11 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         from pendulab.calibration.extract import motor_constants
 
         K, _ = motor_constants(params.with_values(force_gain=1.0))
-        for j, n in enumerate(names):
-            if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
-                uncertainty[j] = max(uncertainty[j], params.force_gain * K * setup.voltage_noise / scales[j])
         # ... and the forces, drags and gain no better than the voltage's estimate shows their common scale.
         shift = _voltage_shift(setup, answer, theta_opt)
         for j, n in enumerate(names):
+            if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
+                uncertainty[j] = max(uncertainty[j], params.force_gain * K * setup.voltage_noise / scales[j])
             if n in _polish.SCALED and prof.status[j] == _polish.DETERMINED:
                 uncertainty[j] = max(uncertainty[j], abs(theta_opt[j]) * math.expm1(shift))
     status, allowed_scaled = list(prof.status), list(prof.allowed)
@@ -752,17 +747,16 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
-    curves, forward_errors, replayed, stretches, n_stretches = [], [], [], [], 0
+    curves, replayed, stretches, n_stretches = [], [], [], 0
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(candidate.whole, replays):
         replayed.append(_replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0])
         simulated = np.r_[a.x0[0], replayed[-1][:, 0]]
         log, used = e.log, e.used
         curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
-        forward_errors.append(simulated - log.x[:used])
         stretches.append(n_stretches + np.searchsorted(a.segments, np.arange(used), side="right") - 1)  # each sample's, between restarts
         n_stretches += len(a.segments)
-    forward, stretch = np.concatenate(forward_errors), np.concatenate(stretches)
+    forward, stretch = np.concatenate([c.x_simulated - c.x_measured for c in curves]), np.concatenate(stretches)
     left_out = _diverged(forward, stretch, FORWARD_LIMIT_STEPS * setup.step)
     counted = forward[~left_out]
     # Where the replay moves the cart, in the stretches it follows (one that diverged may race beyond the slip region).
@@ -893,7 +887,7 @@ def fit_parameters(
     prior = (theta0, regularization) if regularization > 0 else None
     setup = _Setup(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
-        space=_polish.Space(params0, names, scales, lower, upper, prior), interval=interval,
+        space=_polish.Space(params0, names, scales, lower, upper, prior), stride=stride,
         pieces=_pieces(logs, stride), voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
     )
     # The replay and the observer, compiled once per machine.
