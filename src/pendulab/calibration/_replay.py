@@ -322,10 +322,8 @@ def observe(
 
     The replay of :func:`replay`, corrected after each sample towards the logged outputs ``y[k]`` (the
     position ``(n,)``, or the position and the angle ``(n, 2)``): ``state <- predicted + gain @ (y[k] -
-    predicted outputs)`` with ``gain`` ``(4,)`` or ``(4, 2)``. A breakaway a millisecond early no longer
-    shifts the rest of the log; each prediction shows only what the model gets wrong within about one
-    observer time constant, and an upright pendulum, open-loop unstable, stays up. ``gain = 0`` is the
-    replay itself. With ``states=True`` the corrected states ``(m, n, 4)`` too (the observer's estimate
+    predicted outputs)`` with ``gain`` ``(4,)`` or ``(4, 2)`` (why: :mod:`pendulab.calibration._observer`).
+    ``gain = 0`` is the replay itself. With ``states=True`` the corrected states ``(m, n, 4)`` too (the observer's estimate
     of the state after each sample). Arguments as :func:`replay`, with ``params`` an array ``(m, n_params)``.
 
     Examples

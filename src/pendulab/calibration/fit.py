@@ -497,9 +497,7 @@ class _Setup:
     @property
     def denoise(self) -> bool:
         """Whether the logged voltage carries sample noise the motor never saw (a measured, not a commanded,
-        voltage; the cart alone): then the search and the polish replay its denoised twin, a force
-        threshold is no better known than that noise's drive, and the common scale no better than the two
-        estimates of the voltage agree (:func:`_voltage_shift`)."""
+        voltage; the cart alone): the replays then use its denoised twin (and :func:`_result` floors the uncertainties)."""
         return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
 
     def used(self, log: RampLog) -> int:
@@ -546,8 +544,7 @@ def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEs
 
 
 def _observer_search(setup: _Setup) -> _Candidate:
-    """Stage 1: the observer search (:mod:`pendulab.calibration._observer`) from the start and (the cart alone)
-    the logs' own estimate; the replay's polish goes on from its answer."""
+    """Stage 1, the observer search (see the module docstring)."""
     names, space, theta0, with_pendulum = setup.names, setup.space, setup.theta0, setup.with_pendulum
     whole = []
     for log in setup.logs:
@@ -597,7 +594,6 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     """Stage 2: a search's answer polished on the replay under the true law; its replay RMS over the whole logs."""
     space, names = setup.space, setup.names
     replays = candidate.replays
-    # Long logs are polished on the pieces the search saw, each from its state estimate; the check replays everything.
     searched = _pieces_of(setup, replays, candidate.whole)
     result = _polish.polish(searched, space, candidate.theta, max_iter=POLISH_ITER, work=POLISH_WORK)
     target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
@@ -646,12 +642,10 @@ def _replay_rms(setup: _Setup, replays: list[_polish.Anchors], theta: np.ndarray
 
 
 def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
-    """Stage 2, last: where the chosen answer still misses by more than :data:`EVOLVE_ABOVE_STEPS`, the evolution
-    strategy around it (:func:`_polish.evolve`: joint moves that no fixed direction makes), and the polish;
-    with the next of :data:`EVOLVE_SEEDS` while it still misses. ``globally``: the global search instead, where it
-    misses by more than :data:`GLOBAL_ABOVE_STEPS`, from the start and a factor e either way, with :data:`GLOBAL_SEEDS`;
-    not with the pendulum (its replay costs several times the cart's; on the sticky rig's closed loop, at 3.35
-    steps, three seeds took 85 CPU-s and found nothing the bar accepts)."""
+    """Stage 2, last: the evolution strategy around the answer (:func:`_polish.evolve`) and the polish where it misses
+    (:data:`EVOLVE_ABOVE_STEPS`), or ``globally`` the global search (:data:`GLOBAL_ABOVE_STEPS`); not globally with the
+    pendulum (its replay costs several times the cart's; on the sticky rig's closed loop, at 3.35 steps, three seeds
+    took 85 CPU-s and found nothing the bar accepts)."""
     searched, space, result = answer.searched, setup.space, answer.polished
     above, seeds = (GLOBAL_ABOVE_STEPS, GLOBAL_SEEDS) if globally else (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS)
     if answer.rms <= above * setup.step or (globally and setup.with_pendulum):
