@@ -142,8 +142,7 @@ class _Run:
         s, dt = self.s, self.rig.period
         start = self.position
         breakaway_at: float | None = None
-        voltage = 0.0
-        held = 0
+        voltage, held = 0.0, 0
         for _ in range(self.steps(s.phase_timeout)):
             voltage = direction * min(abs(voltage) + rate * dt, target)
             if abs(self.position) >= s.track_limit and np.sign(voltage) == np.sign(self.position):  # pushing past a limit
