@@ -41,22 +41,28 @@ SEED_FRACTION = 0.2
 SEED_SPEED_SHARE = 0.5
 
 
-def _motion(log: RampLog, V: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Speed, acceleration and voltage of the log, all through the same smoothing filter.
+def _motion(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:
+    """Speed, acceleration and voltage (clipped to the amplifier's range) of the logs, all through the same smoothing
+    filter, and whether the amplifier was below saturation; without each log's first and last smoothed samples.
 
     (Savitzky-Golay, cubic.) The filter is linear, so the smoothed signals obey the same linear
     equation as the raw ones: smoothing the acceleration but not the voltage would not (at a step).
     """
     from scipy.signal import savgol_filter
 
-    n = len(log)
-    window = max(5, int(round(SMOOTHING / log.period)) | 1)
-    if n <= window:
-        v = np.gradient(log.x, log.t)
-        return v, np.gradient(v, log.t), V
-    v = savgol_filter(log.x, window, 3, deriv=1, delta=log.period)
-    a = savgol_filter(log.x, window, 3, deriv=2, delta=log.period)
-    return v, a, savgol_filter(V, window, 3)
+    out: list[list[np.ndarray]] = [[], [], [], []]
+    for log in logs:
+        V = np.clip(log.V, -params.V_max, params.V_max)
+        window = max(5, int(round(SMOOTHING / log.period)) | 1)
+        if len(log) <= window:
+            v = np.gradient(log.x, log.t)
+            smoothed = (v, np.gradient(v, log.t), V)
+        else:
+            smoothed = tuple(savgol_filter(y, window, 3, deriv=d, delta=log.period) for y, d in ((log.x, 1), (log.x, 2), (V, 0)))
+        edge = max(5, int(round(SMOOTHING / log.period)))
+        for column, values in zip(out, (*smoothed, np.abs(log.V) < 0.98 * params.V_max)):
+            column.append(values[edge : len(log) - edge])
+    return tuple(np.concatenate(column) for column in out)
 
 
 def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float, float] | None:
@@ -68,16 +74,8 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     from pendulab.calibration.extract import motor_constants
 
     K, b = motor_constants(params.with_values(force_gain=1.0))
-    Mc = params.lumped_cart_mass
-    rows, rhs = [], []
-    for log in logs:
-        v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
-        # Not where the amplifier saturates, and not the first or last samples of the smoothing.
-        edge = max(5, int(round(SMOOTHING / log.period)))
-        keep = (np.abs(log.V) < 0.98 * params.V_max) & (np.arange(len(log)) >= edge) & (np.arange(len(log)) < len(log) - edge)
-        rows.append(np.column_stack([K * V - b * v, -v])[keep])
-        rhs.append(Mc * a[keep])
-    A, y = np.concatenate(rows), np.concatenate(rhs)
+    v, a, V, unsaturated = _motion(logs, params)
+    A, y = np.column_stack([K * V - b * v, -v])[unsaturated], (params.lumped_cart_mass * a)[unsaturated]  # not where the amplifier saturates
     # Moving: faster than the encoder's quantization can fake through the smoothing window.
     speed = np.abs(A[:, 1])
     moving = speed > max(1e-3, 5.0 * float(params.q_x) / SMOOTHING)
@@ -188,16 +186,9 @@ def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[
     from pendulab.calibration.extract import motor_constants
 
     K, b = motor_constants(params.with_values(force_gain=1.0))
-    Mc = params.lumped_cart_mass
-    out: list[list[np.ndarray]] = [[], [], [], []]
-    for log in logs:
-        v, a, V = _motion(log, np.clip(log.V, -params.V_max, params.V_max))
-        edge = max(5, int(round(SMOOTHING / log.period)))
-        keep = slice(edge, len(log) - edge)
-        motor = params.force_gain * (K * V - b * v)
-        for column, values in zip(out, (np.abs(v), (motor - params.Beq * v - Mc * a) * np.sign(v), np.abs(motor), np.abs(Mc * a))):
-            column.append(values[keep])
-    return tuple(np.concatenate(column) for column in out)
+    v, a, V, _ = _motion(logs, params)
+    motor, inertia = params.force_gain * (K * V - b * v), params.lumped_cart_mass * a
+    return np.abs(v), (motor - params.Beq * v - inertia) * np.sign(v), np.abs(motor), np.abs(inertia)
 
 
 def _sliding_speed(params: PlantParameters) -> float:
