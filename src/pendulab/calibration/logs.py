@@ -329,10 +329,8 @@ def _read_mat_hdf5(path: Path, what: str) -> dict[str, np.ndarray]:
                 kind = kind.decode() if isinstance(kind, bytes) else str(kind)
                 if kind in ("char", "cell", "struct") or item.dtype.kind not in "fiub":
                     continue
-                if item.attrs.get("MATLAB_empty", 0):
-                    variables[name] = np.zeros((0,), dtype=float)
-                    continue
-                variables[name] = np.asarray(item[()]).T  # column-major on disk
+                empty = item.attrs.get("MATLAB_empty", 0)
+                variables[name] = np.zeros((0,), dtype=float) if empty else np.asarray(item[()]).T  # column-major on disk
     except OSError as exc:
         raise CalibrationError(f"{what} is not a readable MATLAB .mat file: {exc}") from None
     return variables
@@ -428,9 +426,8 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     found: dict[str, Path] = {}
     for file in files:
         signal = _signal_of(file.stem)
-        if signal is None:
-            names = list(read_mat_variables(file, what=f"old-lab log file {file}"))
-            signal = next((s for s in map(_signal_of, names) if s), None)
+        if signal is None:  # by its variables' names
+            signal = next((s for s in map(_signal_of, read_mat_variables(file, what=f"old-lab log file {file}")) if s), None)
         if signal is None:
             continue  # another file in the folder
         if signal in found:
