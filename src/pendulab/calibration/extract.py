@@ -264,8 +264,7 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
                 best = fit
     if best is None:
         return None, math.inf
-    rms = float(np.sqrt(2 * best.cost / len(t)))
-    return best.x, rms
+    return best.x, float(np.sqrt(2 * best.cost / len(t)))
 
 
 # ---------------------------------------------------------------------- F2 probe fit

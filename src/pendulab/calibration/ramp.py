@@ -75,8 +75,8 @@ class _Stopped(Exception):
 class _Run:
     """Bookkeeping of one ramp test: applies voltages, records the log, checks the track limits."""
 
-    def __init__(self, rig: Rig, settings: RampSettings, progress: Callable[[str], None]) -> None:
-        self.rig, self.s, self.progress = rig, settings, progress
+    def __init__(self, rig: Rig, settings: RampSettings) -> None:
+        self.rig, self.s = rig, settings
         self.t: list[float] = []
         self.V: list[float] = []
         self.x: list[float] = []
@@ -201,7 +201,7 @@ def run_ramp_test(
         raise CalibrationError(f"unknown ramp setting {unknown[0]!r}; known ones are {', '.join(RampSettings.__dataclass_fields__)}")
     settings = replace(settings or RampSettings(), **overrides)
     progress = on_progress or (lambda text: None)
-    run = _Run(rig, settings, progress)
+    run = _Run(rig, settings)
     interrupted, reason, done, done_at = False, "", 0, 0.0
     try:
         for i in range(1, iterations + 1):
