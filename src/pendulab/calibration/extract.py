@@ -368,10 +368,9 @@ def extract_friction(
         x_rest = float(x[k - w])
         unmoved = np.flatnonzero(np.abs(x[k - w : k] - x_rest) <= max(0.5 * q, 3 * noise, 1e-7))
         j = k - w + int(unmoved[-1]) if unmoved.size else k - w
-        F1 = K * abs(_onset_voltage(t, V, x, x_rest, direction, j, k)) if kind == "ramp" else None
+        # A cart that moved only after the release did not break away on the ramp itself.
+        F1 = K * abs(_onset_voltage(t, V, x, x_rest, direction, j, k)) if kind == "ramp" and j < push.release - 1 else None
         onsets[push.start] = j
-        if kind == "ramp" and j >= push.release - 1:
-            F1 = None  # it moved only after the release: no breakaway on the ramp itself
         # Coasting after the release (voltage 0 until the next push).
         values: dict[str, float | None] = {"v1": None, "v2": None, "B": None, "Beq": None}
         rms = None
