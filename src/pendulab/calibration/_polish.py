@@ -83,7 +83,7 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
     ns = nodes.shape[0]
     x0 = np.r_[nodes[:, 0], np.zeros(4 - ns)]
     restarts: dict[int, np.ndarray] = {}
-    upright = with_pendulum and log.alpha is not None and float(np.median(np.abs(log.alpha))) < math.pi / 2
+    upright = with_pendulum and float(np.median(np.abs(log.alpha))) < math.pi / 2
     if not with_pendulum:
         w = rest_samples(log.period)
         spans = rests(log.x[:used], step, float(sigma[0]), log.period)

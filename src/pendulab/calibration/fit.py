@@ -314,10 +314,7 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
             return [savgol_filter(y, window, 3), savgol_filter(y, window, 3, deriv=1, delta=log.period)]
         return [y, np.gradient(y, log.t)]
 
-    columns = smoothed(log.x)
-    if with_pendulum:
-        columns += smoothed(log.alpha if log.alpha is not None else np.zeros(n))
-    return np.column_stack(columns)
+    return np.column_stack(smoothed(log.x) + (smoothed(log.alpha) if with_pendulum else []))  # a pendulum's log has alpha (_check_logs)
 
 
 #: At most this many rounds of scans along the joint directions and polish (the first whatever the cost), while one
