@@ -828,11 +828,9 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         # a staircase, and a half-width interpolated there is not measured (the sticky rig's chirp: Beq and
         # the force gain 0.3 % off, reported to 0.1 %).
         sigma[j] = max(sigma[j], abs(theta[j]) * max(math.expm1(offsets[0]), step))
-        if sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]):  # uncertain by more than MAX_RELATIVE_SIGMA of its value: only bounded
-            status[j], sigma[j] = BOUNDED, math.inf
-        # Determined only if its range is closed too: a cost that rises a little and then stays within
-        # RANGE_COST_RATIO all the way to 0 (or infinity) bounds the parameter on that side, no more (random
-        # steps that all exceed F1 on the light rig: F1 "determined" 71 % high, its range reaching 0).
-        if not 0.0 < allowed[j][0] <= allowed[j][1] < math.inf:
+        # Only bounded if uncertain by more than MAX_RELATIVE_SIGMA of its value, or if its range is open: a cost that
+        # rises a little and then stays within RANGE_COST_RATIO all the way to 0 (or infinity) bounds the parameter on
+        # that side, no more (random steps that all exceed F1 on the light rig: F1 "determined" 71 % high, its range reaching 0).
+        if sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]) or not 0.0 < allowed[j][0] <= allowed[j][1] < math.inf:
             status[j], sigma[j] = BOUNDED, math.inf
     return Profile(tuple(status), sigma, tuple(allowed), threshold, k)
