@@ -514,8 +514,6 @@ def polish(
     for it in range(1, max_iter + 1):
         if done["samples"] > work:
             break
-        # Every parameter up and down by the radius (relative), and the last accepted move again,
-        # all in one batched replay.
         size = radius * np.maximum(np.abs(theta), 1e-2)
         diagonal = [si * size[i] * E[i] + sj * size[j] * E[j] for i, j in pairs for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
         trials = np.array([project(theta + m) for m in np.vstack([np.diag(size), -np.diag(size), *diagonal, momentum])])
@@ -769,7 +767,6 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
             out.append(offsets[i] if staircase else lo_o + (offsets[i] - lo_o) * (cost0 + rise - lo_c) / max(c[i] - lo_c, 1e-300))
         return out[0], out[1]
 
-    # The ranges (``allowed``) reach as far as the true values' own cost may lie above the answer's (RANGE_COST_RATIO).
     wide = max(threshold, (RANGE_COST_RATIO - 1.0) * cost0)
     status, sigma, allowed = [], np.full(n, math.inf), []
     for j in range(n):

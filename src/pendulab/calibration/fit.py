@@ -375,7 +375,6 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
         M = interval_samples(log)
         length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
-        # Where the cart stops and starts (breakaway, sticking): what tells the friction apart.
         edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
         stride = max(M, (length // 8) // M * M)
         for first in range(0, len(log) - length + 1, stride):
@@ -693,8 +692,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     candidate, searched, replays = answer.candidate, answer.searched, answer.replays
     theta_opt = answer.polished.theta
 
-    # What the logs say about each parameter: the replay cost's profile around the answer. A parameter
-    # they do not identify keeps its start value (if the replay stays as good with it).
+    # What the logs say about each parameter (the module docstring); one they do not identify keeps its start value if it replays as well.
     prof = _polish.profile(searched, space, theta_opt)
     kept = [j for j, s_ in enumerate(prof.status) if s_ == _polish.NOT_IDENTIFIED]
     if kept:
