@@ -821,9 +821,8 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     for j in range(n):
         if status[j] != DETERMINED:
             continue
-        # Never below the finest offset (and the Jacobian's step): under it the switching law's replay cost is
-        # a staircase, and a half-width interpolated there is not measured (the sticky rig's chirp: Beq and
-        # the force gain 0.3 % off, reported to 0.1 %).
+        # Never below the finest offset (and the Jacobian's step; the docstring says why): a half-width interpolated
+        # there is not measured (the sticky rig's chirp: Beq and the force gain 0.3 % off, reported to 0.1 %).
         sigma[j] = max(sigma[j], abs(theta[j]) * max(math.expm1(offsets[0]), step))
         # Only bounded if uncertain by more than MAX_RELATIVE_SIGMA of its value, or if its range is open: a cost that
         # rises a little and then stays within RANGE_COST_RATIO all the way to 0 (or infinity) bounds the parameter on

@@ -548,8 +548,7 @@ def _observer_search(setup: _Setup) -> _Candidate:
         sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
         whole.append(_LogEstimate(log, used, M, _initial_states(log, with_pendulum)[:used:M].T.copy(), np.full(used, np.nan), sigma))
     logged = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
-    # A noisy logged voltage: the search, the polish and the check replay the drive the motor got (_Setup.denoise).
-    replays = [_polish.denoised(a) for a in logged] if setup.denoise else list(logged)
+    replays = [_polish.denoised(a) for a in logged] if setup.denoise else list(logged)  # see _Setup.denoise
     searched = _pieces_of(setup, replays, whole)
     starts = [theta0]
     if not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
@@ -573,7 +572,6 @@ def _observer_search(setup: _Setup) -> _Candidate:
         predicted, states = _replay.observe(vector, a.V, a.t, a.measured, a.x0, gain, free=names, states=True)
         e.fitted[:] = np.r_[a.x0[0], predicted[0, :, 0]]
         if with_pendulum:
-            # An upright pendulum's replay restarts from the observer's own state estimates (see the module docstring).
             every = np.vstack([np.r_[a.x0], states[0]])[:: e.stride]
             e.estimates[:, : every.shape[0]] = every.T
             restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
