@@ -448,16 +448,14 @@ def extract_friction(
         measured["F2"], spread["F2"] = max(params.F2, measured["F1"]), 0.0
         notes.append(f"F2 not observed (no probe left the drag regime by force); kept {measured['F2']:g} N as measured (>= F1)")
 
-    raw = tuple(measured[n] for n in FRICTION_NAMES)
     scale = {"F1": mass_ratio, "F2": mass_ratio}
-    scaled = tuple(measured[n] * scale.get(n, 1.0) for n in FRICTION_NAMES)
     spread_scaled = {n: spread[n] * scale.get(n, 1.0) for n in FRICTION_NAMES}
     spread_scaled["Beq"] = spread.get("Beq", 0.0)
     if log.interrupted:
         notes.append("the ramp test was interrupted; the estimate uses the iterations measured until then")
     return FrictionEstimate(
-        friction=scaled,  # type: ignore[arg-type]
-        measured=raw,  # type: ignore[arg-type]
+        friction=tuple(measured[n] * scale.get(n, 1.0) for n in FRICTION_NAMES),  # type: ignore[arg-type]
+        measured=tuple(measured[n] for n in FRICTION_NAMES),  # type: ignore[arg-type]
         spread=spread_scaled,
         counts=counts,
         mass_ratio=float(mass_ratio),
