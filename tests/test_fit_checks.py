@@ -209,7 +209,7 @@ def test_an_answer_that_misses_the_logs_reports_nothing_determined():
     result = FitResult(
         names=("Beq", "force_gain"), values={"Beq": 30.0, "force_gain": 0.8}, initial={"Beq": 4.3, "force_gain": 1.0},
         uncertainty={"Beq": math.inf, "force_gain": math.inf}, residual_rms=1e-4, params=params, n_samples=10,
-        iterations=0, success=True, status="test", seconds=0.0, encoder_step=q, forward_rms=1.5 * CONFIDENT_STEPS * q,
+        iterations=0, seconds=0.0, encoder_step=q, forward_rms=1.5 * CONFIDENT_STEPS * q,
         determination={"Beq": "bounded", "force_gain": "bounded"}, allowed={"Beq": (0.0, math.inf), "force_gain": (0.0, math.inf)},
         confidence=note,
     )

@@ -134,8 +134,6 @@ class FitResult:
     params: PlantParameters
     n_samples: int
     iterations: int
-    success: bool
-    status: str
     seconds: float
     curves: tuple[FitCurve, ...] = field(default=(), repr=False)
     forward_rms: float = math.nan  # position error of the forward simulation (m), see forward_check
@@ -175,7 +173,7 @@ class FitResult:
         >>> t = np.arange(0.0, 4.0, 1e-3)
         >>> x = np.zeros_like(t)
         >>> curve = FitCurve("ramp.csv", t, np.full_like(t, 1.5), x, x, np.where((t > 2.0) & (t < 2.5), 3e-3, 0.0))
-        >>> FitResult(("F1",), {}, {}, {}, 0.0, None, 0, 0, True, "", 0.0, curves=(curve,)).where_it_misses()
+        >>> FitResult(("F1",), {}, {}, {}, 0.0, None, 0, 0, 0.0, curves=(curve,)).where_it_misses()
         'worst in ramp.csv around t = 2.25 s: the cart position x off by 3 mm RMS over 0.5 s (at 1.5 V)'
         """
         worst: tuple[float, str] | None = None
@@ -224,7 +222,6 @@ class FitResult:
             "encoder_step_m": self.encoder_step,
             "forward_simulation_limit_m": self.forward_limit,
             "samples": self.n_samples,
-            "solver_status": self.status,
         }
         record.update(metadata)
         extras = {n: getattr(p, n) for n in FITTED_NAMES if n in self.names}
@@ -239,7 +236,7 @@ class FitResult:
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
         lines.append(
             f"one-sample prediction RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
-            f"{self.iterations} observer search iterations, {self.seconds:.2f} s ({self.status})"
+            f"{self.iterations} observer search iterations, {self.seconds:.2f} s"
         )
         lines.append(
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
@@ -785,8 +782,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         params=params,
         n_samples=sum(len(log) for log in setup.logs),
         iterations=candidate.iterations,
-        success=True,
-        status="observer search converged",
         seconds=time.perf_counter() - t_start,
         curves=tuple(curves),
         forward_rms=forward_rms,
