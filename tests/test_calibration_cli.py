@@ -95,7 +95,7 @@ def swing(x_unit: float, V_unit: float, x_offset: float = 0.0) -> str:
 def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
     t = np.arange(0, 2.0, 1e-3)
     cases = {
-        "missing column": ("t,V\n0,0\n0.001,1\n", "no column x (found: t, V); a log needs columns t, V, x (s, V, m): rename the column in the header (x is read from x or x_measured)"),
+        "missing column": ("t,V\n0,0\n0.001,1\n", "no column x (found: t, V); a log needs columns t, V, x (s, V, m), each a vector: rename the column in the header (x is read from x or x_measured)"),
         "time backwards": ("t,V,x\n0,0,0\n0.002,0.1,0\n0.001,0.2,0\n", "time is not increasing"),
         "NaN": ("t,V,x\n0,0,0\n0.001,0.1,nan\n0.002,0.2,0\n", "x is not finite"),
         "too short": ("t,V,x\n" + "".join(f"{k * 1e-3},{k * 0.01},{k * 1e-6}\n" for k in range(12)), "too short"),

@@ -33,6 +33,13 @@ def test_simulate_run_csv_uses_voltage_and_the_measured_angle(tmp_path):
     assert np.allclose(log.alpha, np.arange(5) * 1e-3 + 0.5)  # alpha_measured preferred
 
 
+def test_a_mat_log_without_the_vectors_says_to_name_the_variables(tmp_path):
+    path = tmp_path / "run.mat"
+    scipy.io.savemat(path, {"data": np.zeros((20, 3))})  # one n x 3 matrix: no vector named t, V or x
+    with pytest.raises(CalibrationError, match=r"\(found: none\); a log needs columns t, V, x \(s, V, m\), each a vector: name the variable"):
+        read_log(path)
+
+
 def test_simulate_run_mat(tmp_path):
     n = 20
     t = np.arange(n) * 1e-3
@@ -64,7 +71,8 @@ def test_write_and_read_back(tmp_path):
         ("t;V;x\n0;0;0\n0,001;1,5;0\n", "is not a number; write numbers with a decimal point, not a comma"),
         ("t,V,x,V\n0,0,0,0\n0.001,1,0,1\n", "column V appears twice in the header"),
         ("t,V,x\n1000,0,0\n1000,0,0\n", "a repeated time stamp: write t with more digits"),
-        ("t,V,x\n0,0,0\n0.001,0\n", "2 fields but the header has 3"),
+        ("t,V,x\n0,0,0\n0.001,0\n", "2 fields but the header (line 1: 't,V,x') has 3"),
+        ("LabVIEW measurement\nrig 3\nt,V,x\n0,0,0\n", "line 3: 1 fields but the header (line 1: 'LabVIEW measurement') has 2; remove any lines above the header"),
         ("0,0,0\n0.001,0,0\n", "no header line"),
         ("t,V,x\n0,0,0\n", "1 sample(s)"),
         ("", "is empty"),
@@ -82,6 +90,8 @@ def test_a_byte_order_mark_is_read_and_other_encodings_are_named(tmp_path):
     what to save it as."""
     log = read_log(csv_file(tmp_path, "\ufefft,V,x\n0,0,0\n0.001,1,0\n0.002,1,0.001\n"))
     assert np.array_equal(log.x, [0, 0, 0.001])
+    excel = read_log(csv_file(tmp_path, "sep=;\r\nt;V;x\r\n0;0;0\r\n0.001;1;0\r\n", "excel.csv"))  # its separator line
+    assert np.array_equal(excel.V, [0, 1])
     latin = tmp_path / "latin.csv"
     latin.write_bytes("# rig 3, 20 \u00b0C\nt,V,x\n0,0,0\n0.001,1,0\n".encode("latin-1"))
     with pytest.raises(CalibrationError) as info:

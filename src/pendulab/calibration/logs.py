@@ -204,7 +204,7 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
     if missing:
         raise CalibrationError(
             f"log {path} has no column {', '.join(missing)} (found: {', '.join(available) or 'none'}); a log needs columns t, V, x "
-            f"(s, V, m): rename the column in the header ({'; '.join(f'{m} is read from ' + ', '.join(accepted[m][:-1]) + ' or ' + accepted[m][-1] for m in missing)})"
+            f"(s, V, m), each a vector: {'name the variable' if path.suffix.lower() == '.mat' else 'rename the column in the header'} ({'; '.join(f'{m} is read from ' + ', '.join(accepted[m][:-1]) + ' or ' + accepted[m][-1] for m in missing)})"
         )
     a_name = _pick(ANGLE_PREFERRED, available)
     return RampLog(**{label: columns[name] for label, name in picked.items()}, alpha=columns[a_name] if a_name else None, source=str(path))
@@ -217,7 +217,8 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         raise CalibrationError(f"log {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8 (or plain ASCII) CSV") from None
     except OSError as exc:
         raise CalibrationError(f"log {path} cannot be read: {exc.strerror or exc}") from None
-    lines = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
+    lines = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")
+             and not (i == 0 and line.startswith("sep="))]  # Excel's line naming the separator, which the header shows too
     if not lines:
         raise CalibrationError(f"log {path} is empty; expected a CSV header naming t, V, x and rows of numbers")
     header_line = lines[0][1]
@@ -244,7 +245,8 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     for line_no, line in lines[1:]:
         row = split(line)
         if len(row) != len(header):
-            raise CalibrationError(f"log {path}, line {line_no}: {len(row)} fields but the header has {len(header)}")
+            raise CalibrationError(f"log {path}, line {line_no}: {len(row)} fields but the header (line {lines[0][0]}: {header_line.strip()[:40]!r}) "
+                                   f"has {len(header)}; remove any lines above the header, or repair the row")
         for name, cell in zip(header, row):
             if not name:
                 continue
