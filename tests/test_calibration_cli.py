@@ -107,6 +107,7 @@ def bad_logs(folder: Path) -> dict[str, tuple[Path, str]]:
         "V in mV": (swing(1.0, 1e3), "give V in volts"),
         "against V": (swing(-1.0, 1.0), "V or x has the wrong sign"),
         "x from the track's end": (swing(1.0, 1.0, x_offset=0.5), "give x from the track's centre"),
+        "x just past the end": (swing(1.0, 1.0, x_offset=0.376), "x reaches 0.416 m, beyond the track's ends"),  # 9 mm past it
         "first step": ("t,V,x\n-0.0004,0,0\n" + swing(1.0, 1.0).split("\n", 2)[2], "the sample period varies from 1 to 1.4 ms"),
         # What a rig's log may carry: missing samples, a lost encoder count, the pendulum left on (helper's audit).
         "samples missing": ("".join(line + "\n" for k, line in enumerate(swing(1.0, 1.0).splitlines()) if not 301 <= k <= 310),
