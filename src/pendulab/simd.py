@@ -122,11 +122,11 @@ def _statement(f: ca.Function, k: int, g: int, inputs, outputs, masks: set[int])
     op, a, o = _OPS[f.instruction_id(k)], f.instruction_input(k), f.instruction_output(k)
     if op == "INPUT":
         return f"w{g}_{o[0]} = {inputs[a[0]](a[1], g)};"
-    value = [f"truth((vl)w{g}_{i})" if i in masks else f"w{g}_{i}" for i in a]  # each operand as a number
+    x = [f"truth((vl)w{g}_{i})" if i in masks else f"w{g}_{i}" for i in a]  # each operand as a number
     mask = [f"(vl)w{g}_{i}" if i in masks else f"(w{g}_{i} != 0)" for i in a]  # ... and as a truth (nonzero)
     if op == "OUTPUT":
-        return outputs[o[0]](o[1], value[0], g)
-    r, x = f"w{g}_{o[0]}", value
+        return outputs[o[0]](o[1], x[0], g)
+    r = f"w{g}_{o[0]}"
     if op == "CONST":
         value = f.instruction_constant(k)
         literal = repr(value) if math.isfinite(value) else "NAN" if math.isnan(value) else ("-" if value < 0 else "") + "INFINITY"

@@ -182,7 +182,7 @@ class FitResult:
             bad = np.flatnonzero(~np.isfinite(error))
             if bad.size:
                 return f"in {c.source}: the replay diverges at t = {c.t[bad[0]]:.2f} s (the cart position x; at {c.V[bad[0]]:.2g} V)"
-            n = min(error.size, max(1, int(round(window / max(float(np.median(np.diff(c.t))), 1e-9)))))
+            n = min(error.size, max(1, int(round(window / _replay.sample_period(c.t)))))
             running = np.sqrt(np.convolve(error**2, np.ones(n) / n, mode="valid"))
             k = int(np.argmax(running))
             middle = k + n // 2
@@ -748,8 +748,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     counted = forward[~left_out]
     # Where the replay moves the cart, in the stretches it follows (one that diverged may race beyond the slip region).
     sizes = [c.t.size for c in curves]  # each log's samples: its replayed states and its first
-    kept = np.split(~left_out, np.cumsum(sizes)[:-1])
-    regimes = [slip_shares(params, a.V[k[1:]], states[k[1:]]) for a, states, k in zip(replays, replayed, kept)]
+    followed = np.split(~left_out, np.cumsum(sizes)[:-1])
+    regimes = [slip_shares(params, a.V[k[1:]], states[k[1:]]) for a, states, k in zip(replays, replayed, followed)]
     forward_rms = float(np.sqrt(np.mean(counted**2))) if np.all(np.isfinite(counted)) else math.inf
     forward_max = float(np.max(np.abs(counted))) if np.all(np.isfinite(counted)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um")
