@@ -11,6 +11,7 @@ log is cut into pieces.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from pendulab.calibration import _polish  # private: the fit's stages are what this checks
@@ -19,7 +20,8 @@ from pendulab.calibration.synthetic import RIGS, synthetic_log
 from pendulab.model.parameters import PlantParameters
 
 
-def test_a_long_log_is_searched_on_pieces_and_the_answer_carries_its_cost_there(monkeypatch):
+def _searched_on_pieces(monkeypatch):
+    """The setup and the polish's answer of a 4 s log searched on 2 s of pieces."""
     monkeypatch.setattr(fit_module, "STAGE_SECONDS", 2.0)
     monkeypatch.setattr(fit_module, "PIECE_SECONDS", 1.0)
     seen = {}
@@ -33,7 +35,11 @@ def test_a_long_log_is_searched_on_pieces_and_the_answer_carries_its_cost_there(
     monkeypatch.setattr(fit_module, "_evolved", spy)
     log = synthetic_log("random steps", RIGS["unseen"], duration=4.0, voltage_noise=0.0)
     fit_module.fit_parameters([log], PlantParameters.preset("none"))
-    setup, answer = seen["setup"], seen["answer"]
+    return seen["setup"], seen["answer"]
+
+
+def test_a_long_log_is_searched_on_pieces_and_the_answer_carries_its_cost_there(monkeypatch):
+    setup, answer = _searched_on_pieces(monkeypatch)
     pieces, whole = answer.searched, answer.replays
     assert pieces is not whole and sum(a.n for a in pieces) <= 0.6 * sum(a.n for a in whole)  # 2 of 4 s
     theta = answer.polished.theta
@@ -41,3 +47,18 @@ def test_a_long_log_is_searched_on_pieces_and_the_answer_carries_its_cost_there(
     on_whole = float(_polish.costs(whole, setup.space, theta[None])[0])
     assert answer.polished.cost == pytest.approx(on_pieces, rel=1e-12)
     assert on_whole > 1.3 * on_pieces  # the two measures differ: comparing them would decide nothing
+
+
+def test_a_search_better_on_the_pieces_but_worse_on_the_whole_log_leaves_the_answer(monkeypatch):
+    """A 120 s log of slow ramps (unseen rig): the global search lowered the pieces' cost 1.86e6 -> 7.75e5 and took
+    the whole log's replay from 157 um to 11 mm; the fit was refused. Such a point is not taken."""
+    setup, answer = _searched_on_pieces(monkeypatch)
+    theta = answer.polished.theta
+    worse = setup.space.project(theta * np.where(np.array(setup.names) == "force_gain", 0.7, 1.0))
+    assert fit_module._replay_rms(setup, answer.replays, worse) > 2 * answer.rms  # the whole log says it is worse
+    claimed = _polish.Polished(worse, 0.5 * answer.polished.cost, 0.5 * answer.polished.cost, 1, 1)  # ... the pieces better
+    monkeypatch.setattr(_polish, "evolve", lambda *args, **kwargs: (worse, claimed.cost))
+    monkeypatch.setattr(_polish, "polish", lambda *args, **kwargs: claimed)
+    monkeypatch.setattr(fit_module, "EVOLVE_ABOVE_STEPS", 0.0)  # it runs whatever the answer's replay
+    kept = fit_module._evolved(setup, answer)
+    assert kept is answer and np.array_equal(kept.polished.theta, theta)

@@ -658,6 +658,10 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
     if result is answer.polished:
         return answer
     rms = _replay_rms(setup, answer.replays, result.theta)
+    if searched is not answer.replays and rms >= answer.rms:  # better on a long log's pieces, worse on the whole: misled (_pieces)
+        setup.progress(f"{'the global search' if globally else 'the evolution strategy around the answer'} found a lower cost on the "
+                       f"searched pieces, but the whole logs replay worse (RMS {rms * 1e6:.0f} um): the answer stays")
+        return answer
     setup.progress(f"{'the global search' if globally else 'the evolution strategy around the answer'}, and the polish: cost "
                    f"{answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
     return _Answer(answer.candidate, result, searched, answer.replays, rms)
