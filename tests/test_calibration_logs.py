@@ -106,3 +106,13 @@ def test_missing_log_and_non_mat_file(tmp_path):
     bad.write_text("not a mat file")
     with pytest.raises(CalibrationError, match="not a readable MATLAB"):
         read_log(bad)
+
+
+@pytest.mark.parametrize("first, second", [("14:03:07.125", "14:03:07.126"), ("2026-11-28 23:59:59.999", "2026-11-29 00:00:00.000"),
+                                           ("2026-11-28T14:03:07.125+01:00", "2026-11-28T14:03:07.126+01:00")])
+def test_a_time_column_of_clock_times_is_read_as_seconds_from_its_first(tmp_path, first, second):
+    """A logger or a spreadsheet writes the time of day (with or without its date): the log starts at t = 0."""
+    log = read_log(csv_file(tmp_path, f"time,V,x\n{first},0,0\n{second},0.5,0\n"))
+    assert log.t.tolist() == [0.0, 0.001]
+    with pytest.raises(CalibrationError, match=r"time='14:03:61' is not a number"):  # not a clock time either
+        read_log(csv_file(tmp_path, "time,V,x\n14:03:07,0,0\n14:03:61,0.5,0\n"))

@@ -25,6 +25,7 @@ import csv
 import io
 import os
 from dataclasses import dataclass, field, replace
+from datetime import datetime
 from pathlib import Path
 from typing import Sequence
 
@@ -242,6 +243,7 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         raise CalibrationError(f"log {path}: column {twice[0]} appears twice in the header; rename or remove one")
     used = {*TIME_NAMES, *VOLTAGE_NAMES, *POSITION_NAMES, *ANGLE_PREFERRED}
     values: dict[str, list[float]] = {name: [] for name in header if name}
+    first_clock: dict[str, datetime] = {}  # a time column of clock times: seconds from its first
     for line_no, line in lines[1:]:
         row = split(line)
         if len(row) != len(header):
@@ -254,12 +256,25 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
             try:
                 values[name].append(float(cell))
             except ValueError:
-                if name in used or name.lower() in {u.lower() for u in used if u != "V"}:
+                if name.lower() in TIME_NAMES and (clock := _clock_time(cell)) is not None:
+                    values[name].append((clock - first_clock.setdefault(name, clock)).total_seconds())
+                elif name in used or name.lower() in {u.lower() for u in used if u != "V"}:
                     hint = ("write numbers with a decimal point, not a comma" if "," in cell and _is_number(cell.replace(",", "."))
                             else "fill the cell or remove the row" if not cell else "repair or remove the row")
                     raise CalibrationError(f"log {path}, line {line_no}: {name}={cell!r} is not a number; {hint}") from None
-                values[name].append(float("nan"))  # a text column we do not use (e.g. a state name)
+                else:
+                    values[name].append(float("nan"))  # a text column we do not use (e.g. a state name)
     return {name: np.asarray(v, dtype=float) for name, v in values.items()}
+
+
+def _clock_time(cell: str) -> datetime | None:
+    """A clock time as a logger writes it: '14:03:07.125', or with its date ('2026-11-28 14:03:07.125', ISO 8601)."""
+    for text in (cell, f"2000-01-01T{cell}"):
+        try:
+            return datetime.fromisoformat(text)
+        except ValueError:
+            pass
+    return None
 
 
 def _is_number(text: str) -> bool:
