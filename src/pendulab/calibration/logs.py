@@ -96,8 +96,7 @@ class RampLog:
     def slice(self, first: int, stop: int) -> "RampLog":
         """Samples ``first`` to ``stop - 1``."""
         part = slice(first, stop)
-        alpha = None if self.alpha is None else self.alpha[part]
-        return replace(self, t=self.t[part], V=self.V[part], x=self.x[part], alpha=alpha)
+        return replace(self, t=self.t[part], V=self.V[part], x=self.x[part], alpha=None if self.alpha is None else self.alpha[part])
 
     def between(self, start: float, stop: float) -> "RampLog":
         """The samples with ``start <= t < stop``."""
@@ -154,14 +153,11 @@ def validate_log(log: RampLog) -> None:
 
 
 def _pick(names: Sequence[str], available: Sequence[str]) -> str | None:
-    for name in names:
-        if name in available:
-            return name
+    """The first of ``names`` in ``available``, else the first there in another case (None if none is)."""
     lowered = {a.lower(): a for a in available}
-    for name in names:
-        if name.lower() in lowered and name != "V":  # 'v' is not the voltage (it may be a speed)
-            return lowered[name.lower()]
-    return None
+    found = [name for name in names if name in available]
+    found += [lowered[name.lower()] for name in names if name.lower() in lowered and name != "V"]  # 'v' is not the voltage (it may be a speed)
+    return found[0] if found else None
 
 
 def read_log(path: str | os.PathLike[str]) -> RampLog:
@@ -288,14 +284,9 @@ def _is_number(text: str) -> bool:
 def _read_mat(path: Path) -> dict[str, np.ndarray]:
     """Column vectors of a ``run.mat`` (or any .mat of column vectors), by variable name."""
     contents = read_mat_variables(path, what=f"log {path}")
-    columns: dict[str, np.ndarray] = {}
-    for name, array in contents.items():
-        if array.dtype.kind not in "fiub":
-            continue  # structs (meta), strings
-        array = array.astype(float)
-        if array.ndim <= 2 and array.size > 0 and (array.ndim < 2 or 1 in array.shape):
-            columns[name] = array.ravel()
-    return columns
+    # Numeric (not structs, meta, or strings), non-empty, and a vector (at most 2-D with one side 1).
+    return {name: array.astype(float).ravel() for name, array in contents.items()
+            if array.dtype.kind in "fiub" and array.ndim <= 2 and array.size > 0 and (array.ndim < 2 or 1 in array.shape)}
 
 
 def read_mat_variables(path: str | os.PathLike[str], what: str | None = None) -> dict[str, np.ndarray]:
@@ -315,10 +306,9 @@ def read_mat_variables(path: str | os.PathLike[str], what: str | None = None) ->
     what = what or f"file {path}"
     try:
         contents = scipy.io.loadmat(str(path), squeeze_me=False)
-    except NotImplementedError:  # MAT v7.3 is HDF5
-        return _read_mat_hdf5(path, what)
     except Exception as exc:  # scipy raises several kinds for a corrupt file
-        if _is_hdf5(path):  # v7.3 written without MATLAB's text header
+        # MAT v7.3 is HDF5 (NotImplementedError), also where written without MATLAB's text header
+        if isinstance(exc, NotImplementedError) or _is_hdf5(path):
             return _read_mat_hdf5(path, what)
         raise CalibrationError(f"{what} is not a readable MATLAB .mat file: {exc}") from None
     return {k: np.asarray(v) for k, v in contents.items() if not k.startswith("__")}
@@ -346,8 +336,7 @@ def _read_mat_hdf5(path: Path, what: str) -> dict[str, np.ndarray]:
                 kind = kind.decode() if isinstance(kind, bytes) else str(kind)
                 if kind in ("char", "cell", "struct") or item.dtype.kind not in "fiub":
                     continue
-                empty = item.attrs.get("MATLAB_empty", 0)
-                variables[name] = np.zeros((0,), dtype=float) if empty else np.asarray(item[()]).T  # column-major on disk
+                variables[name] = np.zeros((0,), dtype=float) if item.attrs.get("MATLAB_empty", 0) else np.asarray(item[()]).T  # column-major on disk
     except OSError as exc:
         raise CalibrationError(f"{what} is not a readable MATLAB .mat file: {exc}") from None
     return variables
@@ -365,7 +354,7 @@ _OLD_LAB_SIGNALS = {
 def _signal_of(name: str) -> str | None:
     """``alpha``, ``x`` or ``voltage`` for a file/variable name, by whole words first, then substrings."""
     stem = name.lower()
-    words = [w for w in "".join(c if c.isalnum() else " " for c in stem).split()]
+    words = "".join(c if c.isalnum() else " " for c in stem).split()
     for signal, keys in _OLD_LAB_SIGNALS.items():
         if any(w in keys for w in words):
             return signal
@@ -478,8 +467,7 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     if n < 2:
         raise CalibrationError(f"old-lab log folder {folder}: the signals overlap for less than one sample period")
     t = t0 + period * np.arange(n)
-    x = np.interp(t, data["x"][:, 0], data["x"][:, 1])
-    alpha = np.interp(t, data["alpha"][:, 0], data["alpha"][:, 1])
+    x, alpha = (np.interp(t, data[signal][:, 0], data[signal][:, 1]) for signal in ("x", "alpha"))
     tv, vv = data["voltage"][:, 0], data["voltage"][:, 1]
     # Held from each logged time on; a rounding error of the new time base must not pick the sample before.
     voltage = vv[np.clip(np.searchsorted(tv, t + 1e-6 * period, side="right") - 1, 0, len(vv) - 1)]
@@ -496,13 +484,12 @@ def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
     """Write ``log`` as CSV (``t,V,x[,alpha]``), atomically."""
     path = Path(path)
     names = ["t", "V", "x"] + (["alpha"] if log.alpha is not None else [])
-    data = np.column_stack([getattr(log, n) for n in names])
     buffer = io.StringIO()
     buffer.write(f"# pendulab calibration log; source: {log.source or 'unknown'}\n")
     for time, text in log.events:
         buffer.write(f"# event t={time:.4f}: {text}\n")
     buffer.write(",".join(names) + "\n")
-    np.savetxt(buffer, data, delimiter=",", fmt="%.10g")
+    np.savetxt(buffer, np.column_stack([getattr(log, n) for n in names]), delimiter=",", fmt="%.10g")
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda handle: handle.write(buffer.getvalue().encode("utf-8")))
     return path
