@@ -19,26 +19,16 @@ from typing import Any
 
 from pendulab.errors import CalibrationError as CalibrationError  # light: no lazy import needed
 
-_EXPORTS = {
-    "Calibration": "files",
-    "DEFAULT_CALIBRATION_PATH": "files",
-    "default_calibration": "files",
-    "load_calibration": "files",
-    "save_calibration": "files",
-    "RampLog": "logs",
-    "read_log": "logs",
-    "write_log": "logs",
-    "Rig": "rig",
-    "VirtualRig": "rig",
-    "RampSettings": "ramp",
-    "run_ramp_test": "ramp",
-    "FrictionEstimate": "extract",
-    "extract_friction": "extract",
-    "mass_ratio": "extract",
-    "FitResult": "fit",
-    "fit_parameters": "fit",
-    "plot_fit": "fit",
+#: The public names, by the submodule that defines them (the list above).
+_BY_MODULE = {
+    "files": ("Calibration", "DEFAULT_CALIBRATION_PATH", "default_calibration", "load_calibration", "save_calibration"),
+    "logs": ("RampLog", "read_log", "write_log"),
+    "rig": ("Rig", "VirtualRig"),
+    "ramp": ("RampSettings", "run_ramp_test"),
+    "extract": ("FrictionEstimate", "extract_friction", "mass_ratio"),
+    "fit": ("FitResult", "fit_parameters", "plot_fit"),
 }
+_EXPORTS = {name: module for module, names in _BY_MODULE.items() for name in names}
 
 __all__ = sorted([*_EXPORTS, "CalibrationError"])
 
