@@ -161,14 +161,11 @@ def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
 def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, ways: int = WAYS) -> str:
     """The C of :data:`_REPLAY` (or :data:`_OBSERVE`) around :func:`_step`, over :mod:`pendulab.simd`'s lanes."""
     one = _step(n_sub, free, fixed, observer)
-    broadcast = lambda name: lambda j, g: f"bc({name})"  # noqa: E731  (the same for every set)
-    if observer:
-        inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), lambda j, g: f"bc(y[{j}])", lambda j, g: f"bc(gain[{j}])", broadcast("c"),
-                  lambda j, g: f"th[{g}][{j}]", broadcast("h")]
-        outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};", lambda j, e, g: f"pm[{g}][{j}] = {e};", lambda j, e, g: ""]
-    else:
-        inputs = [lambda j, g: f"s[{g}][{j}]", broadcast("V"), broadcast("t"), broadcast("r"), lambda j, g: f"bc(sr[{j}])", lambda j, g: f"th[{g}][{j}]", broadcast("h")]
-        outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};"]
+    # Each input's nonzero j for group g: the group's own (its state, its sets' parameters) or one for every set, bc().
+    given = ["bc(y[{j}])", "bc(gain[{j}])", "bc(c)"] if observer else ["bc(r)", "bc(sr[{j}])"]
+    inputs = [lambda j, g, text=text: text.format(j=j, g=g) for text in ("s[{g}][{j}]", "bc(V)", "bc(t)", *given, "th[{g}][{j}]", "bc(h)")]
+    # The next state, and the observer's predicted outputs (its third output, the next state again, is not stored).
+    outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};", lambda j, e, g: f"pm[{g}][{j}] = {e};", lambda j, e, g: ""][: one.n_out()]
     defines = (f"#define WAYS {ways}\n#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
                f"#define SUB {_chunk(n_sub)}\n#define CHUNKS {n_sub // _chunk(n_sub)}\n")
     return simd.PRELUDE + defines + _GROUP + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs, ways))
