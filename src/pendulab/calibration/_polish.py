@@ -80,10 +80,8 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
 
     ``nodes`` ``(ns, N+1)`` are the fit's state estimates at samples ``0, node_stride, ...``.
     """
-    ns = nodes.shape[0]
-    x0 = np.r_[nodes[:, 0], np.zeros(4 - ns)]
+    x0 = np.r_[nodes[:, 0], np.zeros(4 - nodes.shape[0])]
     restarts: dict[int, np.ndarray] = {}
-    upright = with_pendulum and float(np.median(np.abs(log.alpha))) < math.pi / 2
     if not with_pendulum:
         w = rest_samples(log.period)
         spans = rests(log.x[:used], step, float(sigma[0]), log.period)
@@ -101,16 +99,13 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
                 lo, hi = max(first, k - 2 * w), min(stop, k + w)
                 slope, value = np.polyfit(log.t[lo:hi] - log.t[k], log.x[lo:hi], 1)
                 restarts[k] = np.array([float(value), float(slope), 0.0, 0.0])
-    if upright:
+    if with_pendulum and float(np.median(np.abs(log.alpha))) < math.pi / 2:  # upright
         every = max(1, int(round(UNSTABLE_WINDOW / (node_stride * log.period))))
         for j in range(every, nodes.shape[1] - 1, every):
             restarts[j * node_stride] = nodes[:, j].copy()
     columns = [log.x[1:used]] + ([log.alpha[1:used]] if with_pendulum else [])
-    segments = np.unique(np.r_[0, sorted(restarts)]).astype(int)
-    return Anchors(
-        V=log.V[: used - 1], t=log.t[: used - 1], measured=np.column_stack(columns), sigma=sigma, x0=x0,
-        restarts=restarts, segments=segments,
-    )
+    return Anchors(V=log.V[: used - 1], t=log.t[: used - 1], measured=np.column_stack(columns), sigma=sigma, x0=x0, restarts=restarts,
+                   segments=np.unique(np.r_[0, sorted(restarts)]).astype(int))
 
 
 #: Finite-difference steps of a restart's state (x m, xdot m/s, alpha rad, alphadot rad/s) in :func:`settled`.
@@ -288,10 +283,8 @@ def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...
     """Weighted replay errors, ``(m, n_errors)``, for parameter sets ``vectors`` ``(m, n_params)``."""
     rows = []
     for a in logs:
-        states = replay(vectors, a.V, a.t, a.x0, a.restarts, free=free)
-        simulated = states[:, :, [0, 2][: a.measured.shape[1]]]
-        errors = (simulated - a.measured[None]) / a.sigma[None, None, :]
-        rows.append(errors.reshape(errors.shape[0], -1))
+        simulated = replay(vectors, a.V, a.t, a.x0, a.restarts, free=free)[:, :, [0, 2][: a.measured.shape[1]]]
+        rows.append(((simulated - a.measured[None]) / a.sigma[None, None, :]).reshape(len(vectors), -1))
     return np.concatenate(rows, axis=1)
 
 
@@ -384,9 +377,7 @@ def moved(space: Space, theta: np.ndarray, direction: str, x: float) -> np.ndarr
     names = space.names
     v = theta * space.scales
     if direction == "scale":
-        for j, n in enumerate(names):
-            if n in SCALED:
-                v[j] *= math.exp(x)
+        v[[j for j, n in enumerate(names) if n in SCALED]] *= math.exp(x)
     elif direction == "split":
         i, j = names.index("B"), names.index("Beq")
         total = v[i] + v[j]
@@ -548,10 +539,9 @@ def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: S
     it). Two batched replays in all, of whole batches of 16 for an even number of rows (see
     :func:`scan_directions`). Returns the best costs ``(m,)`` and thetas ``(m, n)``.
     """
-    names = space.names
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     m = thetas.shape[0]
-    k = np.array([names.index(PARTNERS[name]) for name in moved_names])
+    k = np.array([space.names.index(PARTNERS[name]) for name in moved_names])
     spans = np.array([PARTNER_SPANS[PARTNERS[name]] for name in moved_names])
     grid = np.linspace(-1.0, 1.0, coarse)[None, :] * spans[:, None]  # (m, coarse), log offsets
     h = spans * 2.0 / (coarse - 1)
@@ -663,10 +653,8 @@ def correlation_length(residuals: np.ndarray, sizes: list[int]) -> float:
     A replay's errors come in runs (a breakaway a millisecond late is off for a while), so ``N``
     errors hold about ``N / k`` independent ones.
     """
-    lengths, weights, offset = [], [], 0
-    for size in sizes:
-        e = residuals[offset : offset + size]
-        offset += size
+    lengths, weights = [], []
+    for e in np.split(residuals, np.cumsum(sizes)[:-1]):
         e = e - e.mean()
         if e.size < 4 or not np.any(e):
             continue
@@ -818,9 +806,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
                 sigma[j] = max(sigma[j], max(abs(e[j] - theta[j]) for e in ends))
             else:  # the joint move is not bounded both ways: neither is this parameter
                 status[j], sigma[j] = BOUNDED, math.inf
-    for j in range(n):
-        if status[j] != DETERMINED:
-            continue
+    for j in [i for i in range(n) if status[i] == DETERMINED]:
         # Never below the finest offset (and the Jacobian's step; the docstring says why): a half-width interpolated
         # there is not measured (the sticky rig's chirp: Beq and the force gain 0.3 % off, reported to 0.1 %).
         sigma[j] = max(sigma[j], abs(theta[j]) * max(math.expm1(offsets[0]), step))
