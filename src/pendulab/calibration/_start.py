@@ -28,6 +28,7 @@ from typing import Sequence
 
 import numpy as np
 
+from pendulab.calibration.extract import motor_constants
 from pendulab.calibration.logs import RampLog
 from pendulab.errors import ParameterError
 from pendulab.model.parameters import PlantParameters
@@ -71,8 +72,6 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     A cart that slides fast feels no stick-slip friction, so ``Mc*a = g*(K*V - b*v) - Beq*v`` there
     (``K``, ``b``: the motor's force per volt and back-EMF damping at ``force_gain = 1``).
     """
-    from pendulab.calibration.extract import motor_constants
-
     K, b = motor_constants(params.with_values(force_gain=1.0))
     v, a, V, unsaturated = _motion(logs, params)
     A, y = np.column_stack([K * V - b * v, -v])[unsaturated], (params.lumped_cart_mass * a)[unsaturated]  # not where the amplifier saturates
@@ -158,8 +157,6 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
         values.update(force_gain=gain, Beq=Beq)
     V1 = breakaway_voltage(logs, float(params0.q_x))
     if V1 is not None:
-        from pendulab.calibration.extract import motor_constants
-
         K, _ = motor_constants(params0.with_values(force_gain=1.0))
         F1 = gain * K * V1
         values.update(F1=F1, F2=max(params0.F2, F1 * params0.F2 / max(params0.F1, 1e-9)))
@@ -183,8 +180,6 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
 def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:
     """Over the logs (without the smoothing's edges): ``|v|``, the friction ``R`` each sample needed (see
     :func:`slip_region`; signed along ``v``), the motor's force ``|gain*(K*V - b*v)|`` and ``|Mc*a|``."""
-    from pendulab.calibration.extract import motor_constants
-
     K, b = motor_constants(params.with_values(force_gain=1.0))
     v, a, V, _ = _motion(logs, params)
     motor, inertia = params.force_gain * (K * V - b * v), params.lumped_cart_mass * a
@@ -224,8 +219,6 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     the samples of the last of those and the next band into drag ``B`` and none. A log that never leaves the slip region (or never enters it) shows ``R/v`` near 0
     everywhere: None.
     """
-    from pendulab.calibration.extract import motor_constants
-
     _, b = motor_constants(params.with_values(force_gain=1.0))
     v, R, *_ = _friction_needed(logs, params)
     moving = v > _sliding_speed(params)

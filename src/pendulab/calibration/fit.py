@@ -74,10 +74,14 @@ from typing import Any, Callable, Iterable, NamedTuple, Sequence
 import numpy as np
 
 from pendulab.calibration import _observer, _polish, _replay
+from pendulab.calibration._start import log_start
+from pendulab.calibration.extract import extract_friction, motor_constants
 from pendulab.calibration.files import FITTED_NAMES, Calibration
 from pendulab.calibration.logs import RampLog, encoder_step
 from pendulab.errors import CalibrationError, FitRejected
 from pendulab.model.parameters import FRICTION_NAMES, PlantParameters
+from pendulab.model.plant import SLIP, friction_regimes
+from pendulab.native import VM_FALLBACK_NOTE, install_hint
 
 #: What ``fit_parameters`` fits by default.
 DEFAULT_FIT = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
@@ -569,8 +573,6 @@ def _observer_search(setup: _Setup) -> _Candidate:
     searched = _pieces_of(setup, replays, whole)
     starts = [theta0]
     if not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
-        from pendulab.calibration._start import log_start
-
         estimate = setup.params0.with_values(**{n: getattr(log_start(setup.logs, setup.params0), n) for n in names})
         shown = ", ".join(f"{n}={getattr(estimate, n):.4g}" for n in names if getattr(estimate, n) != getattr(setup.params0, n))
         setup.progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
@@ -752,8 +754,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
     # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
     if setup.denoise:
-        from pendulab.calibration.extract import motor_constants
-
         K, _ = motor_constants(params.with_values(force_gain=1.0))
         # ... and the forces, drags and gain no better than the voltage's estimate shows their common scale.
         shift = _voltage_shift(setup, answer, theta_opt)
@@ -928,8 +928,6 @@ def fit_parameters(
     )
     # The replay and the observer, compiled once per machine.
     if not _replay.prepare(params0, [log.period for log in logs], names):
-        from pendulab.native import VM_FALLBACK_NOTE, install_hint
-
         progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")
     answer = _evolved(setup, _evolved(setup, _polished(setup, _observer_search(setup))), globally=True)
     step = _voltage_lag(setup, answer, (-1, 1) if not voltage_lag else (int(np.sign(voltage_lag)),)) if abs(voltage_lag) < MAX_LAG else 0
@@ -1025,8 +1023,6 @@ def slip_shares(params: PlantParameters, V: np.ndarray, states: np.ndarray) -> t
     >>> slip_shares(p, np.zeros(4), np.array([[0, 0.0, 0, 0], [0, 0.01, 0, 0], [0, 0.03, 0, 0], [0, 0.2, 0, 0]]))
     (2, 1)
     """
-    from pendulab.model.plant import SLIP, friction_regimes
-
     moving = np.abs(states[:, 1]) >= params.v1
     inside = moving & (friction_regimes(params, states, V) == SLIP)
     return int(np.count_nonzero(inside)), int(np.count_nonzero(moving & ~inside))
@@ -1091,8 +1087,6 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
     params, note
         The starting parameters and a sentence saying where they came from.
     """
-    from pendulab.calibration.extract import extract_friction
-
     if params0.Mp > 0:
         return params0, "starting from the given parameters (logs with the pendulum)"
     vectors = []
