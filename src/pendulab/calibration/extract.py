@@ -152,8 +152,8 @@ class FrictionEstimate:
             "Beq_ramp": self.Beq,
             "pushes": len(self.pushes),
             "notes": list(self.notes),
+            **metadata,
         }
-        record.update(metadata)
         return Calibration(friction=self.friction, metadata=record)
 
     def summary(self) -> str:
@@ -333,7 +333,6 @@ def extract_friction(
         raise CalibrationError(f"mass ratio {mass_ratio!r} must be a positive number")
     params = (params or PlantParameters.preset("none")).with_values(**NO_PENDULUM)
     K, b = motor_constants(params)
-    Mc = params.lumped_cart_mass
     where = f"log {log.source}" if log.source else "log"
     t, V, x, dt = log.t, log.V, log.x, log.period
     q = encoder_step(x)
@@ -380,7 +379,7 @@ def extract_friction(
         if e - r >= 50:
             pre = slice(max(push.start, r - 20), r + 1)
             u_guess = abs(np.polyfit(t[pre] - t[r], x[pre], 1)[0]) if r - pre.start >= 3 else 0.0
-            theta, rms = _fit_coast(t[r:e], x[r:e], direction, u_guess, Mc, b, params.Beq)
+            theta, rms = _fit_coast(t[r:e], x[r:e], direction, u_guess, params.lumped_cart_mass, b, params.Beq)
             if theta is not None and rms <= max(3 * q, 6 * noise, 2e-6):
                 _, u0, Beq, B, v2, v1 = (float(v) for v in theta)
                 values["Beq"] = Beq
@@ -413,10 +412,8 @@ def extract_friction(
 
     # F2: simulate pushes with everything else as measured. A slow ramp shows F2 only when the
     # drag regime ends by force before it ends by speed, i.e. when F2 < v2 (B + Beq) (quasi-static).
-    fit_params = params.with_values(
-        F1=measured["F1"], v1=measured["v1"], v2=measured["v2"], B=measured["B"], Beq=measured.get("Beq", params.Beq), F2=measured["F1"]
-    )
-    F2_crit = measured["v2"] * (measured["B"] + measured.get("Beq", params.Beq))
+    fit_params = params.with_values(**{n: measured[n] for n in ("F1", "v1", "v2", "B")}, Beq=measured.get("Beq", params.Beq), F2=measured["F1"])
+    F2_crit = fit_params.v2 * (fit_params.B + fit_params.Beq)
     found: dict[str, list[float]] = {"ramp": [], "probe": []}
     for push in pushes:
         kind = "ramp" if abs(push.rate) < PROBE_RATE_THRESHOLD else "probe"

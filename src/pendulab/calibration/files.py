@@ -134,8 +134,7 @@ class Calibration:
             values = dict(zip(FRICTION_NAMES, friction))
         else:
             raise CalibrationError(f"{source}: 'friction' must be an object {{\"F1\": ..., \"B\": ...}}, got {type(friction).__name__}")
-        fitted = {n: data.get(n) for n in FITTED_NAMES}
-        checked = _validate(values, fitted, source)
+        checked = _validate(values, {n: data.get(n) for n in FITTED_NAMES}, source)
         metadata = data.get("metadata", {})
         if not isinstance(metadata, Mapping):
             raise CalibrationError(f"{source}: 'metadata' must be a JSON object, got {type(metadata).__name__}")

@@ -208,7 +208,6 @@ class FitResult:
         def finite(v: float) -> float | None:  # JSON has no infinity
             return float(v) if math.isfinite(v) else None
 
-        p = self.params
         record = {
             "determination": dict(self.determination),
             **({"determination_note": self.confidence} if self.confidence else {}),
@@ -229,10 +228,9 @@ class FitResult:
             "forward_simulation_limit_m": self.forward_limit,
             "samples": self.n_samples,
             **({"voltage_lag_samples": self.voltage_lag} if self.voltage_lag else {}),
+            **metadata,
         }
-        record.update(metadata)
-        extras = {n: getattr(p, n) for n in FITTED_NAMES if n in self.names}
-        return Calibration(friction=p.friction, metadata=record, **extras)
+        return Calibration(friction=self.params.friction, metadata=record, **{n: getattr(self.params, n) for n in FITTED_NAMES if n in self.names})
 
     def summary(self) -> str:
         lines = [f"{'name':<11}{'start':>11}{'fitted':>11}  {'± (1 sigma) or range':<22}the logs"]
@@ -433,8 +431,7 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
         raise CalibrationError("no log to fit; give at least one log file")
     for log in logs:
         where = f"log {log.source}" if log.source else "log"
-        M = interval_samples(log)
-        if len(log) < 2 * M + 1:
+        if len(log) < 2 * interval_samples(log) + 1:
             raise CalibrationError(
                 f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two intervals of the state estimates "
                 "and should contain the cart breaking away and moving"
@@ -578,16 +575,14 @@ def _observer_search(setup: _Setup) -> _Candidate:
         setup.progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
         starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / setup.scales))
     found = _observer.search(searched, space, starts)
-    n_errors = sum(a.measured.size for a in searched)
-    rms_observed = math.sqrt(found.cost / n_errors) * float(np.mean([a.sigma[0] for a in searched]))
+    rms_observed = math.sqrt(found.cost / sum(a.measured.size for a in searched)) * float(np.mean([a.sigma[0] for a in searched]))
     setup.progress(
         f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
         f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
     )
     omega, vector = _observer.OMEGAS[-1], space.vectors(found.theta[None])
     for j, (e, a) in enumerate(zip(whole, replays)):
-        ny = a.measured.shape[1]
-        gain = _observer.observer_gain(omega, e.log.period, outputs=ny)
+        gain = _observer.observer_gain(omega, e.log.period, outputs=a.measured.shape[1])
         predicted, states = _replay.observe(vector, a.V, a.t, a.measured, a.x0, gain, free=names, states=True)
         e.fitted[:] = np.r_[a.x0[0], predicted[0, :, 0]]
         if with_pendulum:
@@ -783,9 +778,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(candidate.whole, replays):
         replayed.append(_replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0])
-        simulated = np.r_[a.x0[0], replayed[-1][:, 0]]
         log, used = e.log, e.used
-        curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, simulated))
+        curves.append(FitCurve(log.source or "log", log.t[:used], log.V[:used], log.x[:used], e.fitted, np.r_[a.x0[0], replayed[-1][:, 0]]))
         stretches.append(n_stretches + np.searchsorted(a.segments, np.arange(used), side="right") - 1)  # each sample's, between restarts
         n_stretches += len(a.segments)
     forward, stretch = np.concatenate([c.x_simulated - c.x_measured for c in curves]), np.concatenate(stretches)
@@ -1128,8 +1122,7 @@ def plot_fit(result: FitResult, path: str | Path) -> Path:
         ax_x.legend(loc="best", fontsize=8)
         ax_v.plot(curve.t, curve.V, color="tab:blue", lw=0.8)
         ax_v.set(ylabel="V (V)", xlabel="t (s)")
-    text = ", ".join(f"{n}={result.values[n]:.4g}±{result.uncertainty[n]:.2g}" for n in result.names)
-    fig.suptitle(text, fontsize=8)
+    fig.suptitle(", ".join(f"{n}={result.values[n]:.4g}±{result.uncertainty[n]:.2g}" for n in result.names), fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
