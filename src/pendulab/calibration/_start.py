@@ -54,13 +54,13 @@ def _motion(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarra
     out: list[list[np.ndarray]] = [[], [], [], []]
     for log in logs:
         V = np.clip(log.V, -params.V_max, params.V_max)
-        window = max(5, int(round(SMOOTHING / log.period)) | 1)
+        edge = max(5, int(round(SMOOTHING / log.period)))
+        window = edge | 1  # odd
         if len(log) <= window:
             v = np.gradient(log.x, log.t)
             smoothed = (v, np.gradient(v, log.t), V)
         else:
             smoothed = tuple(savgol_filter(y, window, 3, deriv=d, delta=log.period) for y, d in ((log.x, 1), (log.x, 2), (V, 0)))
-        edge = max(5, int(round(SMOOTHING / log.period)))
         for column, values in zip(out, (*smoothed, np.abs(log.V) < 0.98 * params.V_max)):
             column.append(values[edge : len(log) - edge])
     return tuple(np.concatenate(column) for column in out)
@@ -116,8 +116,7 @@ def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None
     held, broke = [], []
     for log in logs:
         w = rest_samples(log.period)
-        noise = max(step / math.sqrt(12), 1e-6)
-        for first, stop in rests(log.x, step, noise, log.period):
+        for first, stop in rests(log.x, step, max(step / math.sqrt(12), 1e-6), log.period):  # noise: the encoder step's quantization
             inside = np.abs(log.V[first + w : max(first + w, stop - 2 * w)])
             if inside.size:
                 held.append(float(np.max(inside)))
@@ -131,13 +130,9 @@ def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None
 def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
     """The voltage of the breakaway force ``F1`` (V at rest), between :func:`breakaway_bounds` (None if none)."""
     lower, upper = breakaway_bounds(logs, step)
-    if lower is not None and upper is not None:
-        return 0.5 * (lower + upper)
     if upper is not None:
-        return upper
-    if lower is not None and lower > 0.05:
-        return 1.1 * lower
-    return None
+        return upper if lower is None else 0.5 * (lower + upper)
+    return 1.1 * lower if lower is not None and lower > 0.05 else None  # held only: a little above it
 
 
 def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParameters:
