@@ -77,9 +77,7 @@ class _Run:
 
     def __init__(self, rig: Rig, settings: RampSettings) -> None:
         self.rig, self.s = rig, settings
-        self.t: list[float] = []
-        self.V: list[float] = []
-        self.x: list[float] = []
+        self.t, self.V, self.x = [], [], []  # the log's columns (floats)
         self.events: list[tuple[float, str]] = []
         self.position = rig.reset()
 
@@ -232,8 +230,7 @@ def run_ramp_test(
         run.centre()
     except (KeyboardInterrupt, RigEnded) as exc:
         # Ctrl-C, a signal (pendulab.hil.realtime.Terminated) or the rig itself: keep what was measured.
-        interrupted = True
-        reason = str(exc) if str(exc) else "interrupted (Ctrl-C)"
+        interrupted, reason = True, str(exc) or "interrupted (Ctrl-C)"
         run.note(f"ended early: {reason}; motor off")
         progress(f"{reason}: motor off, keeping what was measured ({done} of {iterations} iteration(s) finished)")
     finally:

@@ -185,5 +185,4 @@ def corpus() -> list[Case]:
 
 def held_out(cases: list[Case], seed: int = 19) -> set[str]:
     """Names of a seeded third of ``cases``: looked at only at the end, reported apart."""
-    rng = np.random.default_rng(seed)
-    return {cases[i].name for i in rng.choice(len(cases), len(cases) // 3, replace=False)}
+    return {cases[i].name for i in np.random.default_rng(seed).choice(len(cases), len(cases) // 3, replace=False)}
