@@ -354,16 +354,19 @@ GLOBAL_SEEDS = (1, 2, 3, 4)
 GLOBAL_SIGMA = 1.0
 GLOBAL_GENERATIONS = 200
 #: A logged voltage may lead or lag what the motor got: loggers differ on whether a row holds the voltage applied from
-#: its time on or the one that brought the cart there. The answer is polished (LAG_PROBE_ITER pattern steps) with the
-#: voltage a sample later, a sample earlier and unshifted; where a shift costs less than LAG_GAIN times the least of
-#: the others, the logs are fitted again so, kept only if they then replay better, and probed a sample further, up to
-#: MAX_LAG (:func:`_voltage_lag`). Random steps (12 s), the voltage logged a sample early or late: on the unseen rig the
-#: answer missed by 2.9 steps with every value 2-26 % off and called determined; probed, the shift cost 0.75 and 0.82
-#: times (on the test rig 0.65 and 0.62), the wrong one 4 times. The probe alone does not decide: the unseen rig's slow
-#: ramps (the cart never outruns its slip region) cost 0.66 times a sample earlier, and fitted so replayed at 1.9 steps,
-#: not 0.9. Two samples off were not found (the answer missed by 5.6 steps).
+#: its time on or the one that brought the cart there. Where the answer misses by more than LAG_ABOVE_STEPS, it is
+#: polished (LAG_PROBE_ITER pattern steps) with the voltage a sample later, a sample earlier and unshifted; where a
+#: shift costs less than LAG_GAIN times the least of the others, the logs are fitted again so (then probed a sample
+#: further, up to MAX_LAG), kept if they replay within LAG_KEEP times the answer's RMS (:func:`_voltage_lag`).
+#: Random steps (12 s), the voltage logged a sample early or late: on the unseen rig the answer missed by 2.9 steps
+#: with every value 2-26 % off and called determined; probed, the shift cost 0.75 and 0.82 times (the test rig: 0.65
+#: and 0.62), the wrong one 4 times; fitted shifted, 0.82 steps. Where the cart never outruns its slip region, a lag
+#: trades against the drags' time constant: slow ramps on the unseen rig (60 s, replayed within 1.8 steps) went on to
+#: 3 samples for 12 % less RMS, each shift fitted anew. Two samples off were not found (the answer missed by 5.6 steps).
+LAG_ABOVE_STEPS = 2.0
 LAG_PROBE_ITER = 6
 LAG_GAIN = 0.9
+LAG_KEEP = 0.7
 MAX_LAG = 3
 #: A log whose cart is faster than this (m/s) at its first sample starts moving: its first state is settled
 #: (:func:`_observer_search`). A cart breaking away at its first sample shows 0.01-0.015 m/s there (the smoothing's
@@ -924,7 +927,8 @@ def fit_parameters(
     if not _replay.prepare(params0, [log.period for log in logs], names):
         progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")
     answer = _evolved(setup, _evolved(setup, _polished(setup, _observer_search(setup))), globally=True)
-    step = _voltage_lag(setup, answer, (-1, 1) if not voltage_lag else (int(np.sign(voltage_lag)),)) if abs(voltage_lag) < MAX_LAG else 0
+    probed = abs(voltage_lag) < MAX_LAG and answer.rms > LAG_ABOVE_STEPS * setup.step
+    step = _voltage_lag(setup, answer, (-1, 1) if not voltage_lag else (int(np.sign(voltage_lag)),)) if probed else 0
     if step:
         lag = voltage_lag + step
         progress(f"the answer replays the logs better with the voltage {abs(lag)} sample(s) {'later' if lag > 0 else 'earlier'} than logged "
@@ -934,9 +938,8 @@ def fit_parameters(
                                    on_progress=on_progress, voltage_lag=lag)
         except FitRejected:
             again = None
-        if again is not None and again.forward_rms < answer.rms:
+        if again is not None and again.forward_rms < LAG_KEEP * answer.rms:
             return replace(again, seconds=time.perf_counter() - t_start)
-        # A slow ramp's answer, polished, may trade a shift for its other parameters: that fit replays worse.
         progress(f"fitted with the voltage shifted, the logs replay worse{f' ({again.forward_rms * 1e6:.0f} um)' if again else ''}: "
                  f"the voltage as logged{f', shifted {voltage_lag}' if voltage_lag else ''} stays")
     return replace(_result(setup, answer, start_values, t_start), voltage_lag=voltage_lag)
