@@ -194,6 +194,8 @@ CASES = [
     ("fit {earlier.csv} --interval 0", "--interval"),
     ("fit {earlier.csv} --interval 5", "--interval"),
     ("fit {earlier.csv} --interval nan", "--interval"),
+    ("fit {earlier.csv} --voltage-lag 1.5", "--voltage-lag"),
+    ("fit {flat.csv} --voltage-lag 100000", "voltage lag 100000: give a whole number of samples"),
     ("fit {earlier.csv} --out {earlier.json}", "exists"),
     ("fit {earlier.csv} --out {new}.txt", ".json"),
     ("fit {earlier.csv} --out " + RO + "/f.json", "cannot write"),

@@ -896,8 +896,7 @@ def fit_parameters(
     """
     t_start = time.perf_counter()
     progress = on_progress or (lambda text: None)
-    logged = list(logs)
-    logs = [replace(log, V=shifted_voltage(log.V, voltage_lag)) for log in logged] if voltage_lag else logged
+    logs = logged = list(logs)
     params0 = given = params0 or PlantParameters.preset("none")
     names = tuple(dict.fromkeys([*fit, *(["M_cart"] if fit_mass else [])]))
     unknown = [n for n in names if n not in FITTABLE]
@@ -906,7 +905,12 @@ def fit_parameters(
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
     stride = partial(_stride, interval=interval)  # samples between the state estimates of a log
+    if not isinstance(voltage_lag, (int, np.integer)) or abs(voltage_lag) > min((len(log) for log in logs), default=0) // 10:
+        raise CalibrationError(f"voltage lag {voltage_lag!r}: give a whole number of samples, at most a tenth of the shortest log "
+                               f"({min((len(log) for log in logs), default=0) // 10})")
     _check_logs(logs, params0, stride)
+    if voltage_lag:
+        logs = [replace(log, V=shifted_voltage(log.V, voltage_lag)) for log in logged]
     if start not in ("auto", "given"):
         raise CalibrationError(f"start={start!r}: choose 'auto' (from the logs where they are ramp tests) or 'given'")
     if start == "auto":

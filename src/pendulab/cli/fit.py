@@ -44,6 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", metavar="FILE", help="write the fitted values as a calibration file (JSON)")
     parser.add_argument("--plot", metavar="PNG", help="plot measured against refitted motion")
     add_overwrite_option(parser)
+    parser.add_argument("--voltage-lag", type=int, default=0, metavar="SAMPLES",
+                        help="samples by which the logged voltage leads the cart's motion (negative: lags it); default 0, and the fit "
+                        "looks for a sample either way itself")
     parser.add_argument("--interval", type=float, default=0.01, metavar="S", help="spacing of the fit's state estimates, where an upright pendulum's replay restarts (default 0.01 s)")
     parser.set_defaults(func=run)
 
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     logs = [read_log(path) for path in args.logs]
     result = fit_parameters(
         logs, params0, fit=names, fit_mass=args.fit_mass, interval=args.interval, start="auto" if args.start == "auto" else "given",
-        on_progress=lambda text: print(text, flush=True),
+        on_progress=lambda text: print(text, flush=True), voltage_lag=args.voltage_lag,
     )
     print(result.summary())
     if not result.forward_ok:
@@ -80,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
         raise FitRejected(
             f"the fitted values do not reproduce the logs: a forward simulation misses them by {result.forward_rms * 1e3:.3g} mm RMS "
             f"({result.forward_rms / max(result.encoder_step, 1e-12):.0f} encoder steps; accepted up to {result.forward_limit * 1e3:.3g} mm), "
-            f"{result.where_it_misses()}; no calibration written. Check the logs (units, --pendulum, the voltage column is the applied voltage), "
+            f"{result.where_it_misses()}; no calibration written. Check the logs (units, --pendulum, the voltage column is the applied voltage, "
+            "logged at the time of its row's x: else --voltage-lag), "
             + (f"fit a part of about {result.searched_seconds:.0f} s of them (the search saw that much of their {total:.0f} s, where the cart stops "
                "and starts most)" if result.searched_seconds < 0.95 * total else "give longer or richer logs (ramps in both directions, steps)")
             + ", or start from --calibration"
