@@ -154,17 +154,18 @@ def test_a_log_sampled_at_100_or_200_hz_fits(rate):
             assert abs(result.values[name] / getattr(TEST_RIG, name) - 1) < 0.2, (name, result.values[name])
 
 
-@pytest.mark.parametrize("lag", [1, -1])
-def test_a_voltage_logged_a_sample_early_or_late_is_found_and_fitted_shifted(lag, tmp_path):
+@pytest.mark.parametrize("shape, lag", [("random steps", 1), ("random steps", -1), ("chirp", 1)])
+def test_a_voltage_logged_a_sample_early_or_late_is_found_and_fitted_shifted(shape, lag, tmp_path):
     # Loggers differ on whether a row's voltage is the one applied from its time on or the one that brought the cart
     # there. Random steps (unseen rig, 12 s) with the voltage a sample early: the answer missed by 2.9 steps, every
-    # value 2-26 % off and called determined. Found, they fit as the unshifted log does (0.8 steps, within 0.5 %).
+    # value 2-26 % off and called determined. Found, they fit as the unshifted log does (0.7-0.8 steps, within 0.5 %).
+    # On the unseen rig a chirp's lag was not found when the probe was the replay, polished (fit.LAG_PROBE_ITER).
     from dataclasses import replace
 
     from pendulab.calibration.files import load_calibration, save_calibration
     from pendulab.calibration.synthetic import TEST_RIG
 
-    log = synthetic_log("random steps", TEST_RIG, duration=12.0, voltage_noise=0.0)
+    log = synthetic_log(shape, TEST_RIG, duration=12.0, voltage_noise=0.0)
     n = len(log)
     shifted = replace(log, V=np.r_[log.V[1:], log.V[-1]]) if lag > 0 else replace(log, V=np.r_[log.V[0], log.V[: n - 1]])
     result = fit_parameters([shifted], PlantParameters.preset("none"))

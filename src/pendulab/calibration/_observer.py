@@ -129,6 +129,11 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
     return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs)
 
 
+def refined(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int) -> Observed:
+    """The search's last stage alone, at most ``max_iter`` iterations from ``theta`` (at the narrower bandwidth)."""
+    return _levenberg_marquardt(logs, space, theta, OMEGAS[-1], max_iter)
+
+
 def costs(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:
     """The observer's cost (sum of squared weighted prediction errors and prior) of each row of ``thetas``."""
     R = prediction_errors(logs, space, thetas, omega)

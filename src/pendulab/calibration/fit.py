@@ -354,17 +354,17 @@ GLOBAL_SEEDS = (1, 2, 3, 4)
 GLOBAL_SIGMA = 1.0
 GLOBAL_GENERATIONS = 200
 #: A logged voltage may lead or lag what the motor got: loggers differ on whether a row holds the voltage applied from
-#: its time on or the one that brought the cart there. Where the answer misses by more than LAG_ABOVE_STEPS, it is
-#: polished (LAG_PROBE_ITER pattern steps) with the voltage a sample later, a sample earlier and unshifted; where a
-#: shift costs less than LAG_GAIN times the least of the others, the logs are fitted again so (then probed a sample
-#: further, up to MAX_LAG), kept if they replay within LAG_KEEP times the answer's RMS (:func:`_voltage_lag`).
-#: Random steps (12 s), the voltage logged a sample early or late: on the unseen rig the answer missed by 2.9 steps
-#: with every value 2-26 % off and called determined; probed, the shift cost 0.75 and 0.82 times (the test rig: 0.65
-#: and 0.62), the wrong one 4 times; fitted shifted, 0.82 steps. Where the cart never outruns its slip region, a lag
-#: trades against the drags' time constant: slow ramps on the unseen rig (60 s, replayed within 1.8 steps) went on to
-#: 3 samples for 12 % less RMS, each shift fitted anew. Two samples off were not found (the answer missed by 5.6 steps).
+#: its time on or the one that brought the cart there. Where the answer misses by more than LAG_ABOVE_STEPS, the
+#: observer search goes on (LAG_PROBE_ITER iterations) from its answer with the voltage a sample later, a sample
+#: earlier and unshifted; where a shift costs less than LAG_GAIN times unshifted, the logs are fitted again so (then
+#: probed a sample further, up to MAX_LAG), kept if they replay within LAG_KEEP times the answer's RMS
+#: (:func:`_voltage_lag`). Random steps and a chirp (12 s), the voltage logged a sample early or late: the answers
+#: missed by 2.9-4.9 steps, on random steps with every value 2-26 % off and called determined; probed, the shift cost
+#: 0.54-0.73 times, the wrong one 1.8-2.4 times, and logs without a lag 1.0-2.0 times (slow ramps, sweeps, the closed
+#: loop, with and without voltage noise); fitted shifted, 0.8 steps (the chirp 2.5, as without the lag). The replay
+#: polished instead told them apart less well (a chirp's shift 1.7 times; slow ramps' wrong shift 0.66 times).
 LAG_ABOVE_STEPS = 2.0
-LAG_PROBE_ITER = 6
+LAG_PROBE_ITER = 8
 LAG_GAIN = 0.9
 LAG_KEEP = 0.7
 MAX_LAG = 3
@@ -685,14 +685,14 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False) -> _Answer:
 
 
 def _voltage_lag(setup: _Setup, answer: _Answer, shifts: Sequence[int]) -> int:
-    """The one of ``shifts`` (samples) of the voltage with which the answer, polished briefly, replays what was searched
-    at less than :data:`LAG_GAIN` times the cost unshifted (see :data:`LAG_PROBE_ITER`); 0 if none does."""
+    """The one of ``shifts`` (samples) of the voltage with which the observer search, gone on from its answer, predicts
+    the searched logs at less than :data:`LAG_GAIN` times the cost unshifted (see :data:`LAG_PROBE_ITER`); 0 if none."""
 
     def probed(shift: int) -> float:
         shifted = [replace(a, V=shifted_voltage(a.V, shift)) for a in answer.searched]
-        return _polish.polish(shifted, setup.space, answer.polished.theta, max_iter=LAG_PROBE_ITER, scan=()).cost
+        return _observer.refined(shifted, setup.space, answer.candidate.theta, LAG_PROBE_ITER).cost
 
-    unshifted = min(answer.polished.cost, probed(0))
+    unshifted = probed(0)
     costs = {shift: probed(shift) for shift in shifts}
     best = min(costs, key=costs.__getitem__)
     return best if costs[best] < LAG_GAIN * unshifted else 0
