@@ -170,7 +170,8 @@ def test_fit_reads_an_old_lab_log_folder_like_the_same_log_as_csv(ramp_test_fit,
     assert params0 == PlantParameters.preset("none")
     assert options["start"] == "auto" and tuple(options["fit"]) == DEFAULT_FIT and not options["fit_mass"]
     assert options["interval"] == pytest.approx(0.01)
-    assert set(options) <= {"fit", "fit_mass", "interval", "start", "on_progress"}  # nothing else differs from the API's defaults
+    assert options["voltage_lag"] == 0
+    assert set(options) <= {"fit", "fit_mass", "interval", "start", "on_progress", "voltage_lag"}  # nothing else differs from the API's defaults
     # The file written holds the API's answer and what the log determined of each parameter.
     cal = load_calibration(out)
     fitted = cal.apply(PlantParameters.preset("none"))
