@@ -239,20 +239,17 @@ class FitResult:
             spread = (f"± {self.uncertainty[name]:.2g}" if status == "determined" else
                       _range_text(*self.allowed.get(name, (0.0, math.inf))) if status == "bounded" else "(start value kept)")
             lines.append(f"{name:<11}{self.initial[name]:>11.4g}{self.values[name]:>11.4g}  {spread:<22}{status}")
-        lines.append(
+        lines += [
             f"one-sample prediction RMS {self.residual_rms * 1e6:.1f} um over {self.n_samples} samples; "
-            f"{self.iterations} observer search iterations, {self.seconds:.2f} s"
-        )
-        lines.append(
+            f"{self.iterations} observer search iterations, {self.seconds:.2f} s",
             f"forward simulation (true stick-slip law, the whole log, {self.restarts} restarts from known states): position error RMS {self.forward_rms * 1e6:.1f} um, "
             f"max {self.forward_max * 1e6:.1f} um (encoder step {self.encoder_step * 1e6:.1f} um, accepted up to "
             f"{self.forward_limit * 1e6:.0f} um RMS)"
             + ("; the logged voltage is noisy and was replayed denoised (L1 trend filter, split at its steps)" if self.voltage_filtered else "")
             + (f"; the voltage replayed {abs(self.voltage_lag)} sample(s) {'later' if self.voltage_lag > 0 else 'earlier'} than logged "
-               "(the logs replay far better so: the logger wrote the voltage against another sample's position)" if self.voltage_lag else "")
-        )
-        if self.confidence:
-            lines.append(self.confidence)
+               "(the logs replay far better so: the logger wrote the voltage against another sample's position)" if self.voltage_lag else ""),
+            *([self.confidence] if self.confidence else []),
+        ]
         return "\n".join(lines)
 
 
@@ -346,23 +343,20 @@ POLISH_WORK = 1.4e7
 #: CMA-ES on the replay from the start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each
 #: seed while it still misses. On the unseen rig's triangle wave, stopped at 4.5 steps with B folded into Beq, 3 of 8
 #: seeds found the rig's basin (a cost 0.3-0.5 times the true values'), the others none better; about 9 CPU-s each.
-#: With 10 mV on its voltage 1 of 8 did (seed 4; seed 7 found B + Beq in B alone, 1.18 steps); a seed that finds
-#: nothing costs about 4.5 CPU-s on a 16 s log (it gives up halfway).
-#: A seed still above the answer's cost halfway gives up (the three that found it were below by generation 46-72).
+#: With 10 mV on its voltage 1 of 8 did (seed 4; seed 7 found B + Beq in B alone, 1.18 steps). A seed still above the
+#: answer's cost halfway gives up (the three that found it were below by generation 46-72), after 4.5 CPU-s on a 16 s log.
 GLOBAL_ABOVE_STEPS = 2.0
 GLOBAL_SEEDS = (1, 2, 3, 4)
 GLOBAL_SIGMA = 1.0
 GLOBAL_GENERATIONS = 200
-#: A logged voltage may lead or lag what the motor got: loggers differ on whether a row holds the voltage applied from
-#: its time on or the one that brought the cart there. Where the answer misses by more than LAG_ABOVE_STEPS, the
-#: observer search goes on (LAG_PROBE_ITER iterations) from its answer with the voltage a sample later, a sample
-#: earlier and unshifted; where a shift costs less than LAG_GAIN times unshifted, the logs are fitted again so (then
-#: probed a sample further, up to MAX_LAG), kept if they replay within LAG_KEEP times the answer's RMS
-#: (:func:`_voltage_lag`). Random steps and a chirp (12 s), the voltage logged a sample early or late: the answers
-#: missed by 2.9-4.9 steps, on random steps with every value 2-26 % off and called determined; probed, the shift cost
-#: 0.54-0.73 times, the wrong one 1.8-2.4 times, and logs without a lag 1.0-2.0 times (slow ramps, sweeps, the closed
-#: loop, with and without voltage noise); fitted shifted, 0.8 steps (the chirp 2.5, as without the lag). The replay
-#: polished instead told them apart less well (a chirp's shift 1.7 times; slow ramps' wrong shift 0.66 times).
+#: A logged voltage may lead or lag what the motor got (loggers differ on whether a row holds the voltage applied from
+#: its time on or the one that brought the cart there). Where the answer misses by more than LAG_ABOVE_STEPS, a shift
+#: :func:`_voltage_lag` finds (LAG_PROBE_ITER observer iterations) is fitted again (then probed a sample further, up to
+#: MAX_LAG), kept if the logs replay within LAG_KEEP times the answer's RMS. Random steps and a chirp (12 s), the voltage
+#: a sample early or late, missed by 2.9-4.9 steps (random steps: every value 2-26 % off, called determined); the shift
+#: cost 0.54-0.73 times, the wrong one 1.8-2.4, logs without a lag 1.0-2.0 (slow ramps, sweeps, the closed loop, with
+#: and without voltage noise); fitted shifted, 0.7-0.8 steps, also 2 and 3 samples off. The replay polished as the probe
+#: missed the chirp's shift (1.7 times) and took slow ramps' wrong one (0.66).
 LAG_ABOVE_STEPS = 2.0
 LAG_PROBE_ITER = 8
 LAG_GAIN = 0.9
@@ -386,8 +380,7 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
     travels most (breakaways and sticking tell the friction apart; a long rest tells little), up to
     STAGE_SECONDS in all, not overlapping, each starting on a state estimate of its log.
     """
-    total = sum(log.duration for log in logs)
-    if total <= STAGE_SECONDS * 1.25:
+    if sum(log.duration for log in logs) <= STAGE_SECONDS * 1.25:
         return [(log, j, 0) for j, log in enumerate(logs)]
     candidates = []
     for j, log in enumerate(logs):
@@ -395,8 +388,7 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
         length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
         edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
-        stride = max(M, (length // 8) // M * M)
-        for first in range(0, len(log) - length + 1, stride):
+        for first in range(0, len(log) - length + 1, max(M, (length // 8) // M * M)):
             changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
             moved = (travel[first + length - 1] - travel[first]) / max(travel[-1], 1e-12)
             candidates.append((changes + moved, j, first, length))
@@ -517,14 +509,6 @@ class _Setup:
         voltage; the cart alone): the replays then use its denoised twin (and :func:`_result` floors the uncertainties)."""
         return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
 
-    def used(self, log: RampLog) -> int:
-        """The samples of ``log`` the fit sees: whole intervals between state estimates."""
-        M = self.stride(log)
-        return ((len(log) - 1) // M) * M + 1
-
-    def values(self, theta: np.ndarray) -> dict[str, float]:
-        return {n: float(v * s) for n, v, s in zip(self.names, theta, self.scales)}
-
 
 @dataclass
 class _Candidate:
@@ -565,7 +549,8 @@ def _observer_search(setup: _Setup) -> _Candidate:
     names, space, theta0, with_pendulum = setup.names, setup.space, setup.theta0, setup.with_pendulum
     whole = []
     for log in setup.logs:
-        M, used = setup.stride(log), setup.used(log)
+        M = setup.stride(log)
+        used = ((len(log) - 1) // M) * M + 1  # the samples the fit sees: whole intervals between state estimates
         sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
         whole.append(_LogEstimate(log, used, M, _initial_states(log, with_pendulum)[:used:M].T.copy(), np.full(used, np.nan), sigma))
     logged = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
@@ -594,8 +579,7 @@ def _observer_search(setup: _Setup) -> _Candidate:
             restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
             replays[j] = _polish.settled(restarted, vector[0], names)
         elif abs(a.x0[1]) > MOVING_START:
-            # A log that starts moving starts from the smoothed speed at its edge: that state is settled to replay the
-            # first stretch best (a log cut from a run at 0.4 m/s: v2 came out 12 % high, "determined" to 3 %).
+            # Settled (MOVING_START), not the smoothed speed at its edge: a log cut from a run at 0.4 m/s fitted v2 12 % high, "determined" to 3 %.
             x0 = _polish.settled(a.crop(0, int(a.segments[1]) if a.segments.size > 1 else a.n), vector[0], names).x0
             replays[j], logged[j] = replace(a, x0=x0), replace(logged[j], x0=x0)
     return _Candidate(found.theta, found.iterations, rms_observed, whole, replays, logged)
@@ -603,8 +587,7 @@ def _observer_search(setup: _Setup) -> _Candidate:
 
 def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     """Stage 2: a search's answer polished on the replay under the true law; its replay RMS over the whole logs."""
-    space, names = setup.space, setup.names
-    replays = candidate.replays
+    space, replays = setup.space, candidate.replays
     searched = _pieces_of(setup, replays, candidate.whole)
     result = _polish.polish(searched, space, candidate.theta, max_iter=POLISH_ITER, work=POLISH_WORK)
     target = _cost_of(setup, searched, SCAN_ABOVE_STEPS)
@@ -621,13 +604,12 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     for cycle in range(SCAN_CYCLES):
         if cycle and result.cost <= target:
             break
-        # Scans along what slow logs confuse (_polish.scan_directions), the polish and the walk: once whatever
-        # the cost (the unseen rig's slow ramps: 1.17 encoder steps -> 0.88), again while it misses (SCAN_CYCLES).
+        # Scans (SCAN_CYCLES), the polish and the walk, once whatever the cost (the unseen rig's slow ramps: 1.17 steps -> 0.88).
         scanned = _polish.scan_directions(searched, space, result.theta)
         if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
             break
         result = walked(result.then(_polish.polish(searched, space, scanned.theta, max_iter=POLISH_ITER, scan=()), replays=scanned.replays))
-        setup.progress(f"scans along {', '.join(_polish.directions_of(names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
+        setup.progress(f"scans along {', '.join(_polish.directions_of(setup.names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
     if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
         whole = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
         # Later decisions compare costs on what was searched: the answer carries its cost there (tests/test_fit_pieces.py).
@@ -704,8 +686,7 @@ def shifted_voltage(V: np.ndarray, lag: int) -> np.ndarray:
     >>> shifted_voltage(np.array([0.0, 1.0, 2.0, 3.0]), 1).tolist(), shifted_voltage(np.array([0.0, 1.0, 2.0, 3.0]), -1).tolist()
     ([0.0, 0.0, 1.0, 2.0], [1.0, 2.0, 3.0, 3.0])
     """
-    index = np.clip(np.arange(V.size) - lag, 0, V.size - 1)
-    return V[index]
+    return V[np.clip(np.arange(V.size) - lag, 0, V.size - 1)]
 
 
 def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
@@ -746,7 +727,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
             theta_opt = trial
         else:  # flat around the answer, but not back at the start: the fitted value stays, bounded by nothing known
             prof = replace(prof, status=tuple(_polish.BOUNDED if j in kept else s_ for j, s_ in enumerate(prof.status)))
-    values = setup.values(theta_opt)
+    values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)
     uncertainty = prof.sigma.copy()
     # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
@@ -763,8 +744,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     status, allowed_scaled = list(prof.status), list(prof.allowed)
     if "v1" in names and len(names) > 1:  # the others' moves make up for the stick speed's (see V1_SCATTER)
         j = names.index("v1")
-        lo, hi = allowed_scaled[j]
-        allowed_scaled[j] = (lo / V1_SCATTER, hi * V1_SCATTER)
+        allowed_scaled[j] = (allowed_scaled[j][0] / V1_SCATTER, allowed_scaled[j][1] * V1_SCATTER)
         if status[j] == _polish.DETERMINED:
             status[j], uncertainty[j] = _polish.BOUNDED, math.inf
     uncertainty_method = (
@@ -919,8 +899,7 @@ def fit_parameters(
     start_values = np.array([getattr(params0, n) for n in names])
     scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start_values)])
     theta0 = start_values / scales
-    lower = np.array([_LOWER[n] for n in names]) / scales
-    upper = np.array([_UPPER[n] for n in names]) / scales
+    lower, upper = (np.array([bound[n] for n in names]) / scales for bound in (_LOWER, _UPPER))
     prior = (theta0, regularization) if regularization > 0 else None
     setup = _Setup(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
@@ -978,7 +957,6 @@ def confidence_of(
 
     Examples
     --------
-    >>> import numpy as np
     >>> confidence_of(("determined", "bounded"), np.array([0.1, np.inf]), {"F1": (1.9, 2.1), "v2": (0.04, np.inf)}, 30e-6, 22.75e-6)[0]
     ('determined', 'bounded')
     >>> status, sigma, allowed, note = confidence_of(
@@ -993,14 +971,13 @@ def confidence_of(
         return tuple(status), np.asarray(sigma, dtype=float), dict(allowed), ""
     demoted = tuple(_polish.BOUNDED if s == _polish.DETERMINED else s for s in status)
     sigma = np.where([s == _polish.DETERMINED for s in status], math.inf, np.asarray(sigma, dtype=float))
-    unknown = {name: (0.0, math.inf) for name in allowed}
     note = (
         f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
         f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
         f"an uncertainty or a range; fit again from an earlier calibration of this rig (--calibration FILE --start defaults: the search "
         f"already tried the given start, the logs' own estimate and a global search from the start), or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
     )
-    return demoted, sigma, unknown, note
+    return demoted, sigma, {name: (0.0, math.inf) for name in allowed}, note
 
 
 #: Beyond the slip region (the drag ``Beq`` alone) the cart must spend at least this share of its moving
