@@ -87,7 +87,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
 
     z = np.log(np.maximum(space.project(np.asarray(theta, dtype=float).copy()), FLOOR))
     r = prediction_errors(logs, space, to_theta(z), omega)[0]
-    cost, damping, runs, it = float(r @ r), 1e-2, 1, 0
+    cost, damping, it = float(r @ r), 1e-2, 0
     n = len(z)
     for it in range(1, max_iter + 1):
         moves = DIFFERENCE * np.eye(n)
@@ -98,7 +98,6 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
         scale = np.diag(A) + 1e-12
         trials = np.array([np.clip(z - np.linalg.solve(A + d * np.diag(scale), g), lower, upper) for d in damping * LADDER])
         R = prediction_errors(logs, space, to_theta(trials), omega)
-        runs += 2
         costs = np.einsum("ij,ij->i", R, R)
         best = int(np.argmin(costs))
         if costs[best] >= cost:
@@ -107,7 +106,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
         z, r, cost, damping = trials[best], R[best], float(costs[best]), max(damping * LADDER[best], 1e-8)
         if converged:
             break
-    return Observed(to_theta(z)[0], cost, it, runs)
+    return Observed(to_theta(z)[0], cost, it, 1 + 2 * it)  # runs: the start's, and two per iteration
 
 
 def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Observed:

@@ -68,8 +68,7 @@ def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple
     w = rest_samples(period)
     if len(x) <= w:
         return []
-    windows = np.lib.stride_tricks.sliding_window_view(x, w)
-    still = np.ptp(windows, axis=1) <= max(REST_STEPS * step, 6.0 * noise)
+    still = np.ptp(np.lib.stride_tricks.sliding_window_view(x, w), axis=1) <= max(REST_STEPS * step, 6.0 * noise)
     edges = np.diff(np.r_[0, still.astype(np.int8), 0])
     begins, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return [(int(b), int(e) + w - 1) for b, e in zip(begins, ends)]
@@ -101,8 +100,7 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
                 restarts[k] = np.array([float(value), float(slope), 0.0, 0.0])
     if with_pendulum and float(np.median(np.abs(log.alpha))) < math.pi / 2:  # upright
         every = max(1, int(round(UNSTABLE_WINDOW / (node_stride * log.period))))
-        for j in range(every, nodes.shape[1] - 1, every):
-            restarts[j * node_stride] = nodes[:, j].copy()
+        restarts.update({j * node_stride: nodes[:, j].copy() for j in range(every, nodes.shape[1] - 1, every)})
     columns = [log.x[1:used]] + ([log.alpha[1:used]] if with_pendulum else [])
     return Anchors(V=log.V[: used - 1], t=log.t[: used - 1], measured=np.column_stack(columns), sigma=sigma, x0=x0, restarts=restarts,
                    segments=np.unique(np.r_[0, sorted(restarts)]).astype(int))
@@ -274,9 +272,7 @@ def denoised_voltage(V: np.ndarray) -> np.ndarray:
 
 def denoised(a: Anchors) -> Anchors:
     """``a`` with its voltage through :func:`denoised_voltage` if it is noisy (else ``a`` itself)."""
-    if a.denoised or voltage_noise(a.V) <= VOLTAGE_NOISE:
-        return a
-    return Anchors(denoised_voltage(a.V), a.t, a.measured, a.sigma, a.x0, a.restarts, a.segments, True)
+    return a if a.denoised or voltage_noise(a.V) <= VOLTAGE_NOISE else replace(a, V=denoised_voltage(a.V), denoised=True)
 
 
 def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...] | None) -> np.ndarray:
@@ -415,7 +411,6 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
     theta = space.project(np.asarray(theta, dtype=float).copy())
     evaluate = cost_of or (lambda thetas: costs(logs, space, thetas))
     cost = start = float(evaluate(theta[None])[0])
-    replays = 1
     names = space.names
     for _ in range(rounds):
         for d in directions_of(names):
@@ -436,11 +431,10 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                     extra = [space.project(np.where(np.arange(len(th)) == j, v2 / space.scales[j], th)) for v2 in SLIP_SPEEDS for th in trials]
                     trials = np.vstack([trials, extra])
                 c = evaluate(trials)
-                replays += 1
                 k = int(np.argmin(c))
                 if c[k] < cost:
                     theta, cost = trials[k], float(c[k])
-    return Polished(theta, cost, start, rounds, replays)
+    return Polished(theta, cost, start, rounds, 1 + rounds * len(directions_of(names)) * len(spans))  # one replay per scan
 
 
 #: Pairs of parameters that trade off, moved together (diagonally) by :func:`polish`.
@@ -469,20 +463,20 @@ def polish(
     against the force gain, which both set a steady speed) and the last good move, all in one batched replay, and keeps the
     best if it lowers the cost; otherwise the radius shrinks threefold, down to 0.1 %. The
     order constraints ``F1 <= F2`` and ``v1 <= v2`` and the bounds are kept by projection. It stops
-    early once it has replayed ``work`` samples (parameter sets x samples), a bound that, unlike a
-    clock, gives the same answer on a busy machine.
+    early once it has replayed ``work`` samples (parameter sets x samples; see fit.POLISH_WORK).
     """
     names, project = space.names, space.project
-    done = {"samples": 0.0}
+    done = {"samples": 0.0, "replays": 0}
     n_samples = sum(a.n for a in logs)
 
     def cost_of(thetas: np.ndarray) -> np.ndarray:
         done["samples"] += thetas.shape[0] * n_samples
+        done["replays"] += 1
         return costs(logs, space, thetas)
 
     theta = project(np.asarray(theta, dtype=float).copy())
     cost = start_cost = float(cost_of(theta[None])[0])
-    radius, replays, it, n = 0.02, 1, 0, len(theta)
+    radius, it, n = 0.02, 0, len(theta)
     # The thresholds first (see the docstring), one batched replay per scan. (A coarser sub-step than the plant's,
     # 0.5 ms, is three times faster, but it moved the replay by about an encoder step: a log of steps went astray.)
     scanned = theta
@@ -494,12 +488,9 @@ def polish(
             trials = np.tile(scanned, (15, 1))
             trials[:, j] = scanned[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), 15))
             trials = np.array([project(th) for th in trials])
-            replays += 1
             scanned = trials[int(np.argmin(cost_of(trials)))]
-    if scanned is not theta:
-        replays += 1
-        if (c := float(cost_of(scanned[None])[0])) < cost:
-            theta, cost = scanned, c
+    if scanned is not theta and (c := float(cost_of(scanned[None])[0])) < cost:
+        theta, cost = scanned, c
     momentum, E = np.zeros(n), np.eye(n)
     pairs = [(names.index(a), names.index(b)) for a, b in PAIRS if a in names and b in names]
     for it in range(1, max_iter + 1):
@@ -508,7 +499,6 @@ def polish(
         size = radius * np.maximum(np.abs(theta), 1e-2)
         diagonal = [si * size[i] * E[i] + sj * size[j] * E[j] for i, j in pairs for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
         trials = np.array([project(theta + m) for m in np.vstack([np.diag(size), -np.diag(size), *diagonal, momentum])])
-        replays += 1
         tried = cost_of(trials)
         best = int(np.argmin(tried))
         if tried[best] < cost * (1 - 1e-6):
@@ -519,7 +509,7 @@ def polish(
             radius /= 3.0
             if radius < 1e-3:
                 break
-    return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=replays)
+    return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=done["replays"])
 
 
 #: The slip region's corner: the cart leaves it at ``F2`` of drive or ``v2`` of speed, whichever comes first, so
@@ -555,8 +545,7 @@ def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: S
     c1 = costs(logs, space, T1).reshape(m, coarse)
     centre = grid[np.arange(m), np.argmin(c1, axis=1)]
     T2 = trials(centre[:, None] + np.linspace(-1.0, 1.0, fine)[None, :] * h[:, None])
-    c2 = costs(logs, space, T2).reshape(m, fine)
-    c = np.c_[c1, c2]
+    c = np.c_[c1, costs(logs, space, T2).reshape(m, fine)]
     T = np.concatenate([T1.reshape(m, coarse, -1), T2.reshape(m, fine, -1)], axis=1)
     best = np.argmin(c, axis=1)
     return c[np.arange(m), best], T[np.arange(m), best]
@@ -678,8 +667,7 @@ def stretch_of(logs: list[Anchors]) -> np.ndarray:
     """
     out, offset = [], 0
     for a in logs:
-        sample = np.repeat(np.arange(a.n), a.measured.shape[1])
-        out.append(offset + np.searchsorted(a.segments, sample, side="right") - 1)
+        out.append(offset + np.searchsorted(a.segments, np.repeat(np.arange(a.n), a.measured.shape[1]), side="right") - 1)
         offset += len(a.segments)
     return np.concatenate(out)
 
@@ -727,8 +715,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     # their autocorrelation shows (a threshold crossed or not shifts a whole stretch).
     threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
     m = len(offsets)
-    # F2 and v2 (PARTNERS): the move with the partner's best value, as the docstring says (one batched replay per round).
-    chains = []
+    chains = []  # F2 and v2 (PARTNERS): the move with the partner's best value, one batched replay per round
     for j, name in enumerate(space.names):
         if name in PARTNERS and PARTNERS[name] in space.names:
             for side in range(2):
@@ -761,17 +748,14 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         up, down = reach(1 + 2 * j * m, space.names[j] in THRESHOLDS, wide)
         allowed.append((theta[j] * math.exp(-down) if math.isfinite(down) else 0.0, theta[j] * math.exp(up) if math.isfinite(up) else math.inf))
         up, down = reach(1 + 2 * j * m, space.names[j] in THRESHOLDS)
-        if math.isfinite(up) and math.isfinite(down):
-            status.append(DETERMINED)
+        status.append((NOT_IDENTIFIED, BOUNDED, DETERMINED)[math.isfinite(up) + math.isfinite(down)])  # by the sides bounded
+        if status[j] == DETERMINED:
             sigma[j] = abs(theta[j]) * (math.exp(max(up, down)) - 1)
-        else:
-            status.append(BOUNDED if math.isfinite(up) or math.isfinite(down) else NOT_IDENTIFIED)
     determined = [j for j in range(n) if status[j] == DETERMINED]
     base = 1 + 2 * n * m + 2 * m * len(joint)
     if determined:
         J = ((R[base : base + n] - R[base + n : base + 2 * n]) / (2 * size[:, None])).T[:, determined]
-        inverse = np.linalg.pinv(J.T @ J)
-        covariance = inverse * threshold
+        inverse = np.linalg.pinv(J.T @ J)  # times the threshold: the linearized covariance
         # Cluster-robust (sandwich) covariance with the stretches between restarts as clusters: a replay's
         # errors within a stretch share one cause (a breakaway early or late, a restart's state), and the
         # model's own errors pull each stretch its own way; their scatter is an uncertainty too.
@@ -780,7 +764,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         np.add.at(scores, clusters, J * r0[:, None])
         S = scores.shape[0]
         robust = inverse @ (scores.T @ scores) @ inverse * (S / max(S - len(determined), 1))
-        sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.maximum(np.diag(covariance), np.diag(robust)), 0.0, None)))
+        sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.maximum(np.diag(inverse * threshold), np.diag(robust)), 0.0, None)))
     for i, d in enumerate(joint):
         up, down = reach(1 + 2 * n * m + 2 * i * m)
         ends = [moved(space, theta, d, x * widths[d]) for x in (up, -down) if math.isfinite(x)]
@@ -800,19 +784,16 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
                 else:
                     low = 0.0
             allowed[j] = (low, high)
-            if status[j] != DETERMINED:
-                continue
-            if len(ends) == 2:
+            if status[j] == DETERMINED and len(ends) == 2:
                 sigma[j] = max(sigma[j], max(abs(e[j] - theta[j]) for e in ends))
-            else:  # the joint move is not bounded both ways: neither is this parameter
+            elif status[j] == DETERMINED:  # the joint move is not bounded both ways: neither is this parameter
                 status[j], sigma[j] = BOUNDED, math.inf
     for j in [i for i in range(n) if status[i] == DETERMINED]:
         # Never below the finest offset (and the Jacobian's step; the docstring says why): a half-width interpolated
         # there is not measured (the sticky rig's chirp: Beq and the force gain 0.3 % off, reported to 0.1 %).
         sigma[j] = max(sigma[j], abs(theta[j]) * max(math.expm1(offsets[0]), step))
-        # Only bounded if uncertain by more than MAX_RELATIVE_SIGMA of its value, or if its range is open: a cost that
-        # rises a little and then stays within RANGE_COST_RATIO all the way to 0 (or infinity) bounds the parameter on
-        # that side, no more (random steps that all exceed F1 on the light rig: F1 "determined" 71 % high, its range reaching 0).
+        # A range open on a side (the docstring): a cost that rises a little and then stays within RANGE_COST_RATIO all the way
+        # to 0 (or infinity) bounds it there, no more (random steps all above F1 on the light rig: F1 "determined" 71 % high).
         if sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]) or not 0.0 < allowed[j][0] <= allowed[j][1] < math.inf:
             status[j], sigma[j] = BOUNDED, math.inf
     return Profile(tuple(status), sigma, tuple(allowed), threshold, k)
