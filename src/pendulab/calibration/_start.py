@@ -9,8 +9,6 @@ the drive and the drag from fast motion (:func:`drive_and_drag`), the breakaway 
 
 Examples
 --------
->>> import numpy as np
->>> from pendulab.calibration.logs import RampLog
 >>> from pendulab.model.plant import PlantModel
 >>> p = PlantParameters.preset("none", Beq=9.0, force_gain=0.7)
 >>> t = np.arange(4000) * 1e-3
@@ -23,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import Sequence
 
@@ -93,15 +92,12 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
         z, *_ = np.linalg.lstsq(M, np.r_[y[use], math.sqrt(ridge) * prior * scale], rcond=None)
         solution = z / scale
         residual = np.abs(A @ solution - y)
-        spread = 1.4826 * float(np.median(residual[use])) + 1e-9
-        grown = residual <= 3.0 * spread
+        grown = residual <= 3.0 * (1.4826 * float(np.median(residual[use])) + 1e-9)  # within three robust spreads
         if np.array_equal(grown, use) or np.count_nonzero(grown) < 20:
             break
         use = grown
     gain, Beq = (float(s) for s in solution)
-    if not (math.isfinite(gain) and math.isfinite(Beq)) or gain <= 0:
-        return None
-    return gain, max(Beq, 0.0)
+    return (gain, max(Beq, 0.0)) if math.isfinite(gain) and math.isfinite(Beq) and gain > 0 else None
 
 
 def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None, float | None]:
@@ -123,8 +119,7 @@ def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None
             if stop < len(log) - 1:
                 broke.append(float(np.max(np.abs(log.V[max(first, stop - 2 * w) : stop + 1]))))
     lower = max(held) if held else None
-    upper = min((u for u in broke if lower is None or u >= lower), default=None)
-    return lower, upper
+    return lower, min((u for u in broke if lower is None or u >= lower), default=None)
 
 
 def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
@@ -144,31 +139,27 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
     """
     if params0.Mp > 0:
         return params0
-    values: dict[str, float] = {}
     drive = drive_and_drag(logs, params0)
-    gain = params0.force_gain
-    if drive is not None:
-        gain, Beq = drive
-        values.update(force_gain=gain, Beq=Beq)
+    values: dict[str, float] = {} if drive is None else {"force_gain": drive[0], "Beq": drive[1]}
+    gain = values.get("force_gain", params0.force_gain)
     V1 = breakaway_voltage(logs, float(params0.q_x))
     if V1 is not None:
         K, _ = motor_constants(params0.with_values(force_gain=1.0))
         F1 = gain * K * V1
         values.update(F1=F1, F2=max(params0.F2, F1 * params0.F2 / max(params0.F1, 1e-9)))
     if drive is not None:
-        slip = slip_region(logs, params0.with_values(force_gain=gain, Beq=values["Beq"]))
+        driven = params0.with_values(force_gain=gain, Beq=values["Beq"])
+        slip = slip_region(logs, driven)
         if slip is not None:
             values.update(B=slip[0], v2=slip[1], v1=min(params0.v1, 0.5 * slip[1]))
             # F2 at least the force the cart slid under (a start below it leaves the slip region too early).
-            pushed = slipping_force(logs, params0.with_values(force_gain=gain, Beq=values["Beq"]), slip[0], slip[1])
+            pushed = slipping_force(logs, driven, slip[0], slip[1])
             if pushed is not None:
                 values["F2"] = max(values.get("F2", params0.F2), pushed)
     start = params0
     for name, value in values.items():  # an estimate outside the plant's range (a log it misreads) is left out
-        try:
+        with contextlib.suppress(ParameterError):
             start = start.with_values(**{name: value})
-        except ParameterError:
-            continue
     return start
 
 
@@ -193,11 +184,8 @@ def slipping_force(logs: Sequence[RampLog], params: PlantParameters, B: float, v
     None where fewer than 20 samples slid there."""
     v, R, motor, inertia = _friction_needed(logs, params)
     # Sliding steadily (the inertia a tenth of the drive at most) with the slip region's drag, within a factor 2.
-    slipping = (v > _sliding_speed(params)) & (v < v2) & (R > 0.5 * B * v) & (R < 2.0 * B * v)
-    slipping &= inertia <= 0.1 * motor
-    if np.count_nonzero(slipping) < 20:
-        return None
-    return float(np.quantile(motor[slipping], 0.9))
+    slipping = (v > _sliding_speed(params)) & (v < v2) & (R > 0.5 * B * v) & (R < 2.0 * B * v) & (inertia <= 0.1 * motor)
+    return float(np.quantile(motor[slipping], 0.9)) if np.count_nonzero(slipping) >= 20 else None
 
 
 #: Speed bands (quantiles of the moving samples) in which the slip drag is read.
@@ -224,8 +212,7 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     band = np.clip(np.searchsorted(edges, v, side="right") - 1, 0, SLIP_BANDS - 1)
     ratio = np.array([np.median(R[band == k] / v[band == k]) for k in range(SLIP_BANDS)])
     # Clearly above 0: a fifth of the drag the cart feels beyond the slip region, and a fifth of the largest band.
-    floor = max(0.2 * (params.Beq + params.force_gain * b), 0.2 * float(np.max(ratio)))
-    slip = ratio > floor
+    slip = ratio > max(0.2 * (params.Beq + params.force_gain * b), 0.2 * float(np.max(ratio)))
     if not np.any(slip) or np.all(slip):
         return None
     B = float(np.median(ratio[slip]))
@@ -237,5 +224,4 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     speeds, slipping = v[near][order], (R[near] / v[near] > 0.5 * B)[order]
     wrong = np.r_[0, np.cumsum(~slipping)] + np.r_[np.cumsum(slipping[::-1])[::-1], 0]
     k = int(np.argmin(wrong))  # the split falls before sample k: v2 halfway between its neighbours
-    v2 = 0.5 * float(speeds[max(k - 1, 0)] + speeds[min(k, speeds.size - 1)])
-    return B, v2
+    return B, 0.5 * float(speeds[max(k - 1, 0)] + speeds[min(k, speeds.size - 1)])
