@@ -89,12 +89,9 @@ def motor_constants(params: PlantParameters) -> tuple[float, float]:
     from pendulab.model.plant import plant_equations
 
     state, V = ca.SX.sym("s", 4), ca.SX.sym("V")
-    p = {n: v for n, v in zip(params.names(), params.with_values(I_max=0.0).as_vector())}
-    _, signals = plant_equations(state, V, p, 0.0)
+    _, signals = plant_equations(state, V, dict(zip(params.names(), params.with_values(I_max=0.0).as_vector())), 0.0)
     f = ca.Function("motor_force", [state, V], [signals["F_motor"]])
-    K = float(f([0, 0, 0, 0], 1.0))
-    b = -float(f([0, 1.0, 0, 0], 0.0))
-    return K, b
+    return float(f([0, 0, 0, 0], 1.0)), -float(f([0, 1.0, 0, 0], 0.0))  # K: 1 V at rest; b: 1 m/s at 0 V
 
 
 @dataclass(frozen=True)
@@ -176,9 +173,8 @@ class _Push:
 def _find_pushes(log: RampLog) -> list[_Push]:
     V, dt = log.V, log.period
     off = np.abs(V) <= _ZERO
-    starts = np.flatnonzero(off[:-1] & ~off[1:]) + 1
     pushes: list[_Push] = []
-    for a in starts:
+    for a in np.flatnonzero(off[:-1] & ~off[1:]) + 1:  # where V leaves 0
         first = V[a]
         # The ramp-from-zero signature: V[a+j] = (j+1) V[a] over the first three samples.
         expected = first * np.arange(1, 4)
@@ -213,9 +209,7 @@ def _onset_voltage(t: np.ndarray, V: np.ndarray, x: np.ndarray, x_rest: float, d
     except ValueError:
         return float(V[j])
     t0 = float(fit.x[1])
-    if not (t[j] - 0.1 <= t0 <= t[k]):
-        return float(V[j])
-    return float(np.interp(t0, t, V))
+    return float(np.interp(t0, t, V)) if t[j] - 0.1 <= t0 <= t[k] else float(V[j])
 
 
 # ---------------------------------------------------------------------- coasting (release) fit
@@ -262,9 +256,7 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
                 continue
             if best is None or fit.cost < best.cost:
                 best = fit
-    if best is None:
-        return None, math.inf
-    return best.x, float(np.sqrt(2 * best.cost / len(t)))
+    return (None, math.inf) if best is None else (best.x, float(np.sqrt(2 * best.cost / len(t))))
 
 
 # ---------------------------------------------------------------------- F2 probe fit
@@ -298,9 +290,7 @@ def _fit_F2(log: RampLog, lo: int, hi: int, params: PlantParameters, F_low: floa
         best = 0.5 * (grid[flat[0]] + grid[flat[-1]])
         step = grid[1] - grid[0]
         left, right = max(F_low, grid[flat[0]] - step), min(F_high, grid[flat[-1]] + step)
-    if J[k] > 0.25 * reference or best >= 0.98 * F_high:
-        return None
-    return float(best)
+    return None if J[k] > 0.25 * reference or best >= 0.98 * F_high else float(best)
 
 
 # ---------------------------------------------------------------------- main entry
@@ -359,8 +349,7 @@ def extract_friction(
         lo, hi = max(push.start - w, 0), push.release
         if hi - lo <= w:
             continue
-        gained = direction * (x[lo + w : hi] - x[lo : hi - w])
-        beyond = np.flatnonzero(gained >= threshold)
+        beyond = np.flatnonzero(direction * (x[lo + w : hi] - x[lo : hi - w]) >= threshold)
         if not beyond.size:
             continue  # the cart did not break away during this push
         k = lo + w + int(beyond[0])
@@ -384,8 +373,7 @@ def extract_friction(
                 _, u0, Beq, B, v2, v1 = (float(v) for v in theta)
                 values["Beq"] = Beq
                 if v2 < 0.95 * u0:  # the cart coasted freely first: the drag phase started at v2
-                    values["v2"], values["B"] = v2, B
-                    values["v1"] = v1 if v1 < 0.95 * v2 else None
+                    values.update(v2=v2, B=B, v1=v1 if v1 < 0.95 * v2 else None)
         estimates.append(
             PushEstimate(kind, direction, float(t[push.start]), float(t[min(push.release, len(t) - 1)]), F1=F1, decay_rms=rms, **values)
         )
@@ -402,13 +390,11 @@ def extract_friction(
         values_ = [getattr(e, name) for e in estimates if getattr(e, name) is not None]
         counts[name] = len(values_)
         if values_:
-            measured[name] = float(np.mean(values_))
-            spread[name] = float(np.std(values_, ddof=1)) if len(values_) > 1 else 0.0
+            measured[name], spread[name] = float(np.mean(values_)), (float(np.std(values_, ddof=1)) if len(values_) > 1 else 0.0)
         elif name != "Beq":
             measured[name], spread[name] = getattr(params, name), 0.0
             notes.append(f"{name} not observed (no coasting phase showed it); kept the nominal {measured[name]:g}")
-    if measured["v1"] > measured["v2"]:
-        measured["v1"] = measured["v2"]
+    measured["v1"] = min(measured["v1"], measured["v2"])
 
     # F2: simulate pushes with everything else as measured. A slow ramp shows F2 only when the
     # drag regime ends by force before it ends by speed, i.e. when F2 < v2 (B + Beq) (quasi-static).
@@ -423,8 +409,7 @@ def extract_friction(
                 continue
             lo = max(push.start, onsets[push.start] - 50)
             # Once the cart is faster than v2 the drag is gone whatever F2 is: nothing more to learn.
-            speed = np.abs(x[lo + w : hi] - x[lo : hi - w]) / (w * dt)
-            fast = np.flatnonzero(speed > 1.2 * measured["v2"])
+            fast = np.flatnonzero(np.abs(x[lo + w : hi] - x[lo : hi - w]) / (w * dt) > 1.2 * measured["v2"])  # the speed
             hi = lo + w + int(fast[0]) + 50 if fast.size else hi
             F2 = _fit_F2(log, lo, hi, fit_params, measured["F1"], 1.1 * F2_crit)
         else:
@@ -439,21 +424,18 @@ def extract_friction(
     F2_values = found["ramp"] or found["probe"]
     counts["F2"] = len(F2_values)
     if F2_values:
-        measured["F2"] = float(np.mean(F2_values))
-        spread["F2"] = float(np.std(F2_values, ddof=1)) if len(F2_values) > 1 else 0.0
+        measured["F2"], spread["F2"] = float(np.mean(F2_values)), (float(np.std(F2_values, ddof=1)) if len(F2_values) > 1 else 0.0)
     else:
         measured["F2"], spread["F2"] = max(params.F2, measured["F1"]), 0.0
         notes.append(f"F2 not observed (no probe left the drag regime by force); kept {measured['F2']:g} N as measured (>= F1)")
 
     scale = {"F1": mass_ratio, "F2": mass_ratio}
-    spread_scaled = {n: spread[n] * scale.get(n, 1.0) for n in FRICTION_NAMES}
-    spread_scaled["Beq"] = spread.get("Beq", 0.0)
     if log.interrupted:
         notes.append("the ramp test was interrupted; the estimate uses the iterations measured until then")
     return FrictionEstimate(
         friction=tuple(measured[n] * scale.get(n, 1.0) for n in FRICTION_NAMES),  # type: ignore[arg-type]
         measured=tuple(measured[n] for n in FRICTION_NAMES),  # type: ignore[arg-type]
-        spread=spread_scaled,
+        spread={**{n: spread[n] * scale.get(n, 1.0) for n in FRICTION_NAMES}, "Beq": spread.get("Beq", 0.0)},
         counts=counts,
         mass_ratio=float(mass_ratio),
         Beq=measured.get("Beq"),
