@@ -129,10 +129,7 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
     step = step_function(False, _chunk(n_sub)).expand()
     s, V, t, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
     theta = ca.SX.sym("theta", len(free))
-    entries = [ca.SX(v) for v in fixed]
-    for j, i in enumerate(free):
-        entries[i] = theta[j]
-    p = ca.vertcat(*entries)
+    p = ca.vertcat(*(theta[free.index(i)] if i in free else ca.SX(v) for i, v in enumerate(fixed)))  # free: its symbol
     if observer:
         y, gain, c = ca.SX.sym("y", observer), ca.SX.sym("gain", 4, observer), ca.SX.sym("c")
         predicted = step(s, V, p, t, h)

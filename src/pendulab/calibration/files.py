@@ -190,7 +190,6 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
 
     Examples
     --------
-    >>> from pendulab.model.parameters import PlantParameters
     >>> calibration = load_calibration(DEFAULT_CALIBRATION_PATH)
     >>> calibration.apply(PlantParameters.preset()).friction
     (1.5, 0.005, 3.0, 0.05, 20.0)
@@ -228,8 +227,7 @@ def _load_mat(path: Path) -> Calibration:
     from pendulab.calibration.logs import read_mat_variables
 
     source = f"calibration file {path}"
-    variables = read_mat_variables(path, what=source)
-    numeric = {k: v for k, v in variables.items() if v.dtype.kind in "fiub"}
+    numeric = {k: v for k, v in read_mat_variables(path, what=source).items() if v.dtype.kind in "fiub"}
     if numeric and all(v.size == 0 for v in numeric.values()):
         raise CalibrationError(
             f"{source} is empty (variable {', '.join(sorted(numeric))} holds no numbers); "

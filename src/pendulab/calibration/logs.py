@@ -21,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -266,10 +267,8 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
 def _clock_time(cell: str) -> datetime | None:
     """A clock time as a logger writes it: '14:03:07.125', or with its date ('2026-11-28 14:03:07.125', ISO 8601)."""
     for text in (cell, f"2000-01-01T{cell}"):
-        try:
+        with contextlib.suppress(ValueError):
             return datetime.fromisoformat(text)
-        except ValueError:
-            pass
     return None
 
 
@@ -283,9 +282,8 @@ def _is_number(text: str) -> bool:
 
 def _read_mat(path: Path) -> dict[str, np.ndarray]:
     """Column vectors of a ``run.mat`` (or any .mat of column vectors), by variable name."""
-    contents = read_mat_variables(path, what=f"log {path}")
     # Numeric (not structs, meta, or strings), non-empty, and a vector (at most 2-D with one side 1).
-    return {name: array.astype(float).ravel() for name, array in contents.items()
+    return {name: array.astype(float).ravel() for name, array in read_mat_variables(path, what=f"log {path}").items()
             if array.dtype.kind in "fiub" and array.ndim <= 2 and array.size > 0 and (array.ndim < 2 or 1 in array.shape)}
 
 
@@ -355,12 +353,10 @@ def _signal_of(name: str) -> str | None:
     """``alpha``, ``x`` or ``voltage`` for a file/variable name, by whole words first, then substrings."""
     stem = name.lower()
     words = "".join(c if c.isalnum() else " " for c in stem).split()
-    for signal, keys in _OLD_LAB_SIGNALS.items():
-        if any(w in keys for w in words):
-            return signal
-    for signal, keys in _OLD_LAB_SIGNALS.items():
-        if any(len(k) > 2 and k in stem for k in keys):
-            return signal
+    for matches in (lambda k: k in words, lambda k: len(k) > 2 and k in stem):  # whole words first, then substrings
+        for signal, keys in _OLD_LAB_SIGNALS.items():
+            if any(map(matches, keys)):
+                return signal
     return None
 
 
@@ -486,8 +482,7 @@ def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
     names = ["t", "V", "x"] + (["alpha"] if log.alpha is not None else [])
     buffer = io.StringIO()
     buffer.write(f"# pendulab calibration log; source: {log.source or 'unknown'}\n")
-    for time, text in log.events:
-        buffer.write(f"# event t={time:.4f}: {text}\n")
+    buffer.writelines(f"# event t={time:.4f}: {text}\n" for time, text in log.events)
     buffer.write(",".join(names) + "\n")
     np.savetxt(buffer, np.column_stack([getattr(log, n) for n in names]), delimiter=",", fmt="%.10g")
     path.parent.mkdir(parents=True, exist_ok=True)

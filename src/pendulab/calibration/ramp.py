@@ -32,6 +32,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -234,10 +235,8 @@ def run_ramp_test(
         run.note(f"ended early: {reason}; motor off")
         progress(f"{reason}: motor off, keeping what was measured ({done} of {iterations} iteration(s) finished)")
     finally:
-        try:
+        with contextlib.suppress(Exception):  # the log matters more than a failing stop on a broken link
             rig.stop()
-        except Exception:  # the log matters more than a failing stop on a broken link
-            pass
     if len(run.t) < 2:
         raise CalibrationError("the ramp test was stopped before anything was measured")
     return RampLog(

@@ -167,8 +167,7 @@ class _FmuStepper:
         self._live = False
 
     def reset(self, x0: float) -> float:
-        start = {"x": x0, "xdot": 0.0, "alpha": 0.0, "alphadot": 0.0, "V": 0.0}
-        (self._fmu.reset if self._live else self._fmu.setup)(0.0, start)
+        (self._fmu.reset if self._live else self._fmu.setup)(0.0, {"x": x0, "xdot": 0.0, "alpha": 0.0, "alphadot": 0.0, "V": 0.0})
         self._live = True
         self._fmu.read(self._out)
         return self._out.values["Real"][0]
@@ -196,11 +195,10 @@ class _CasadiStepper:
         from pendulab.model.plant import MAX_SUBSTEP, PlantModel, step_function, substeps
 
         n_sub = substeps(period, MAX_SUBSTEP)
-        step = step_function(False, n_sub)
         model = PlantModel()
         state, V, t = ca.MX.sym("state", 4), ca.MX.sym("V"), ca.MX.sym("t")
         p = ca.MX.sym("p", model.n_parameters)
-        after = step(state, V, p, t, period / n_sub)
+        after = step_function(False, n_sub)(state, V, p, t, period / n_sub)
         measured = model.outputs(after, V, p, t + period)[1]
         self._f = ca.Function("virtual_rig_step", [state, V, p, t], [after, measured]).expand()
         self._measure = model.outputs

@@ -75,8 +75,7 @@ def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
             sign = -sign
         return V
     if shape == "triangle":
-        phase = (0.4 * t) % 1.0
-        return 3.0 * (4 * np.abs(phase - 0.5) - 1)
+        return 3.0 * (4 * np.abs((0.4 * t) % 1.0 - 0.5) - 1)  # 0.4 Hz
     if shape == "random steps":
         edges = np.cumsum(rng.uniform(0.25, 0.6, size=int(duration / 0.25) + 2))
         levels = rng.choice([-1.0, 1.0], size=edges.size) * rng.uniform(0.5, 3.5, size=edges.size)
