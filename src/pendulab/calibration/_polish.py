@@ -70,8 +70,7 @@ def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple
         return []
     still = np.ptp(np.lib.stride_tricks.sliding_window_view(x, w), axis=1) <= max(REST_STEPS * step, 6.0 * noise)
     edges = np.diff(np.r_[0, still.astype(np.int8), 0])
-    begins, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [(int(b), int(e) + w - 1) for b, e in zip(begins, ends)]
+    return [(int(b), int(e) + w - 1) for b, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]  # begins, ends
 
 
 def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarray, step: float, with_pendulum: bool) -> Anchors:

@@ -272,9 +272,8 @@ def _fit_F2(log: RampLog, lo: int, hi: int, params: PlantParameters, F_low: floa
     x0 = np.array([x[0], 0.0, 0.0, 0.0])
 
     def costs(candidates: np.ndarray) -> np.ndarray:
-        sets = [params.with_values(F2=float(F2)) for F2 in candidates]
         # The fit's replay (its parameters free: the compiled library the fit uses, no other to build).
-        states = replay(sets, log.V[lo : hi - 1], log.t[lo : hi - 1], x0, free=DEFAULT_FIT)
+        states = replay([params.with_values(F2=float(F2)) for F2 in candidates], log.V[lo : hi - 1], log.t[lo : hi - 1], x0, free=DEFAULT_FIT)
         return np.sum((states[:, :, 0] - x[None, 1:]) ** 2, axis=1)
 
     left, right = F_low, F_high

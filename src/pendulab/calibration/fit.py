@@ -1083,8 +1083,7 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
     merged = {**dict(zip(FRICTION_NAMES, params0.friction)), **values}
     merged["F2"] = max(merged["F2"], merged["F1"])
     merged["v1"] = min(merged["v1"], merged["v2"])
-    text = ", ".join(f"{n}={merged[n]:.4g}" for n in FRICTION_NAMES)
-    return params0.with_values(**merged), f"starting from the ramp-test extraction: {text}"
+    return params0.with_values(**merged), "starting from the ramp-test extraction: " + ", ".join(f"{n}={merged[n]:.4g}" for n in FRICTION_NAMES)
 
 
 def plot_fit(result: FitResult, path: str | Path) -> Path:

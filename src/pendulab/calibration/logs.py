@@ -427,9 +427,8 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         )
     found: dict[str, Path] = {}
     for file in files:
-        signal = _signal_of(file.stem)
-        if signal is None:  # by its variables' names
-            signal = next((s for s in map(_signal_of, read_mat_variables(file, what=f"old-lab log file {file}")) if s), None)
+        # by the file's name, else by its variables' names
+        signal = _signal_of(file.stem) or next((s for s in map(_signal_of, read_mat_variables(file, what=f"old-lab log file {file}")) if s), None)
         if signal is None:
             continue  # another file in the folder
         if signal in found:

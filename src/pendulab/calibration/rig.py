@@ -199,8 +199,7 @@ class _CasadiStepper:
         state, V, t = ca.MX.sym("state", 4), ca.MX.sym("V"), ca.MX.sym("t")
         p = ca.MX.sym("p", model.n_parameters)
         after = step_function(False, n_sub)(state, V, p, t, period / n_sub)
-        measured = model.outputs(after, V, p, t + period)[1]
-        self._f = ca.Function("virtual_rig_step", [state, V, p, t], [after, measured]).expand()
+        self._f = ca.Function("virtual_rig_step", [state, V, p, t], [after, model.outputs(after, V, p, t + period)[1]]).expand()  # state, measured
         self._measure = model.outputs
         self._p = ca.DM(params.as_vector())
         self._state = ca.DM.zeros(4)
