@@ -116,3 +116,5 @@ def test_a_time_column_of_clock_times_is_read_as_seconds_from_its_first(tmp_path
     assert log.t.tolist() == [0.0, 0.001]
     with pytest.raises(CalibrationError, match=r"time='14:03:61' is not a number"):  # not a clock time either
         read_log(csv_file(tmp_path, "time,V,x\n14:03:07,0,0\n14:03:61,0.5,0\n"))
+    with pytest.raises(CalibrationError, match=r"line 3: .* has no time zone and the first row's time has the other"):  # was a TypeError
+        read_log(csv_file(tmp_path, "time,V,x\n2026-11-28T14:03:07+01:00,0,0\n2026-11-28T14:03:08,0.5,0\n"))

@@ -254,7 +254,11 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
                 values[name].append(float(cell))
             except ValueError:
                 if name.lower() in TIME_NAMES and (clock := _clock_time(cell)) is not None:
-                    values[name].append((clock - first_clock.setdefault(name, clock)).total_seconds())
+                    first = first_clock.setdefault(name, clock)
+                    if (clock.tzinfo is None) != (first.tzinfo is None):  # datetime cannot subtract one from the other
+                        raise CalibrationError(f"log {path}, line {line_no}: {name}={cell!r} has {'no' if clock.tzinfo is None else 'a'} time zone "
+                                               "and the first row's time has the other; give every time with its zone or none") from None
+                    values[name].append((clock - first).total_seconds())
                 elif name in used or name.lower() in {u.lower() for u in used if u != "V"}:
                     hint = ("write numbers with a decimal point, not a comma" if "," in cell and _is_number(cell.replace(",", "."))
                             else "fill the cell or remove the row" if not cell else "repair or remove the row")
