@@ -885,9 +885,9 @@ def fit_parameters(
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
     stride = partial(_stride, interval=interval)  # samples between the state estimates of a log
-    if not isinstance(voltage_lag, (int, np.integer)) or abs(voltage_lag) > min((len(log) for log in logs), default=0) // 10:
-        raise CalibrationError(f"voltage lag {voltage_lag!r}: give a whole number of samples, at most a tenth of the shortest log "
-                               f"({min((len(log) for log in logs), default=0) // 10})")
+    most_lag = min((len(log) for log in logs), default=0) // 10  # a tenth of the shortest log
+    if not isinstance(voltage_lag, (int, np.integer)) or abs(voltage_lag) > most_lag:
+        raise CalibrationError(f"voltage lag {voltage_lag!r}: give a whole number of samples, at most a tenth of the shortest log ({most_lag})")
     _check_logs(logs, params0, stride)
     if voltage_lag:
         logs = [replace(log, V=shifted_voltage(log.V, voltage_lag)) for log in logged]
