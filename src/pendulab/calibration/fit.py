@@ -680,7 +680,9 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False, quiet: bool
 def _rescanned(setup: _Setup, answer: _Answer) -> _Answer:
     """Stage 2, before the global search: where the answer misses (:data:`GLOBAL_ABOVE_STEPS`), the thresholds scanned finely
     from the logs' own estimate with ``F2`` out of the way (:data:`RESCAN`), then evolved and polished (:func:`_evolved`);
-    taken if it replays better. Not with the pendulum (no estimate)."""
+    taken if it replays better. Not with the pendulum, which has no estimate: from its answer instead, the sticky rig's
+    closed loop with 10 mV on the logged voltage went from 3.35 to 1.81 steps, with v2 -18 % and B +27 % called
+    determined at more than 3 sigmas (its noisy voltage's replay prefers them, also with restarts settled at either)."""
     estimate, space, searched = answer.candidate.estimate, setup.space, answer.searched
     if estimate is None or answer.rms <= GLOBAL_ABOVE_STEPS * setup.step or not {"F2", "v2"} <= set(setup.names):
         return answer
