@@ -371,6 +371,11 @@ LAG_PROBE_ITER = 8
 LAG_GAIN = 0.9
 LAG_KEEP = 0.7
 MAX_LAG = 3
+#: With the pendulum the logs cannot tell a voltage logged a sample early or late from one on time (the voltage follows
+#: the motion: the observer probe's cost ratios were 0.90-1.08 either way, with and without a lag), so each determined
+#: parameter is uncertain at least by how far the voltage shifted a sample either way moves it (:func:`_lag_spread`).
+#: The unseen rig's closed loop logged a sample off replayed at 1.7-2.4 steps with Beq 2.8-3.1 % off, reported to +-0.3 %.
+LAG_SPREAD_SHIFTS = (-1, 1)
 #: A log whose cart is faster than this (m/s) at its first sample starts moving: its first state is settled
 #: (:func:`_observer_search`). A cart breaking away at its first sample shows 0.01-0.015 m/s there (the smoothing's
 #: edge), and settling it at the search's values cost two triangle waves their answer (one 25 steps off).
@@ -750,6 +755,30 @@ def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
     return abs(centre)
 
 
+def _lag_spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[int]) -> np.ndarray:
+    """How far (scaled) each of the ``determined`` parameters moves, the larger either way, when the voltage of the searched
+    logs is shifted by :data:`LAG_SPREAD_SHIFTS` samples: one Gauss-Newton step from ``theta`` (central differences of
+    relative step 3e-3, as :func:`_polish.profile`'s), the others held; zero for the rest."""
+    spread = np.zeros(theta.size)
+    if not determined:
+        return spread
+    space, logs = setup.space, answer.searched
+    size = 3e-3 * np.abs(theta[determined])
+    moves = np.zeros((len(determined), theta.size))
+    moves[np.arange(len(determined)), determined] = size
+
+    def errors(anchors: list[_polish.Anchors], thetas: np.ndarray) -> np.ndarray:
+        return np.nan_to_num(_polish.replay_errors(anchors, space.vectors(thetas), setup.names), nan=1e6)
+
+    R = errors(logs, np.vstack([theta[None], theta + moves, theta - moves]))
+    J = ((R[1 : 1 + len(determined)] - R[1 + len(determined) :]) / (2 * size[:, None])).T
+    for shift in LAG_SPREAD_SHIFTS:
+        shifted = errors([replace(a, V=shifted_voltage(a.V, shift)) for a in logs], theta[None])[0]
+        step = np.linalg.lstsq(J, -(shifted - R[0]), rcond=None)[0]
+        spread[determined] = np.maximum(spread[determined], np.abs(step))
+    return spread
+
+
 def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: float) -> FitResult:
     """Stage 3: the answer's profile, uncertainties and check (the whole logs replayed): the fit's result."""
     names, scales, space, params0 = setup.names, setup.scales, setup.space, setup.params0
@@ -782,6 +811,12 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
             if n in _polish.SCALED and prof.status[j] == _polish.DETERMINED:
                 uncertainty[j] = max(uncertainty[j], abs(theta_opt[j]) * math.expm1(shift))
     status, allowed_scaled = list(prof.status), list(prof.allowed)
+    if setup.with_pendulum:  # the logs cannot tell the voltage's alignment (LAG_SPREAD_SHIFTS)
+        determined = [j for j, s_ in enumerate(status) if s_ == _polish.DETERMINED]
+        uncertainty = np.maximum(uncertainty, _lag_spread(setup, answer, theta_opt, determined))
+        for j in determined:
+            if uncertainty[j] > _polish.MAX_RELATIVE_SIGMA * abs(theta_opt[j]):
+                status[j], uncertainty[j] = _polish.BOUNDED, math.inf
     if "v1" in names and len(names) > 1:  # the others' moves make up for the stick speed's (see V1_SCATTER)
         j = names.index("v1")
         allowed_scaled[j] = (allowed_scaled[j][0] / V1_SCATTER, allowed_scaled[j][1] * V1_SCATTER)
@@ -794,6 +829,8 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         + (f"; the forces at least the drive of the logged voltage's noise ({setup.voltage_noise * 1e3:.2g} mV), and the gain, forces "
            f"and drags at least how far their best common scale moves with the other estimate of the voltage ({math.expm1(shift):.2%})"
            if setup.denoise else "")
+        + ("; with the pendulum, at least how far the voltage shifted a sample either way moves them (the logs cannot tell its alignment)"
+           if setup.with_pendulum else "")
     )
 
     # The check: the whole logs replayed with the answer (restarted only where the state is known).
