@@ -130,8 +130,8 @@ def test_a_log_whose_first_step_is_long_replays_at_its_median_period():
         assert abs(result.values[name] / getattr(TEST_RIG, name) - 1) < 0.02, (name, result.values[name])
 
 
-@pytest.mark.parametrize("rate", [100, 200])
-def test_a_log_sampled_at_100_or_200_hz_fits(rate):
+@pytest.mark.parametrize("rate, seed", [(100, 1), (200, 1), (100, 2)])
+def test_a_log_sampled_at_100_or_200_hz_fits(rate, seed):
     # The helper's audit (session 20): docs/ta.md says 100 to 2000 Hz, but at 100 Hz the rests (3 samples, within 6
     # noise sigmas read off a curved motion: 99 um) held a moving cart, the replay restarted it from rest, and the fit
     # refused the log at 54 encoder steps; at 200 Hz it missed by 4.6 and determined nothing.
@@ -142,13 +142,20 @@ def test_a_log_sampled_at_100_or_200_hz_fits(rate):
     period = 1.0 / rate
     fine = synthetic_log("random steps", TEST_RIG, duration=12.0, voltage_noise=0.0)
     V = fine.V[: len(fine) - 1 : round(period / fine.period)]  # held for a whole sample, as a rig at that rate drives it
-    x = PlantModel().simulate(TEST_RIG, V, period)[:, 0] + np.random.default_rng(1).normal(0.0, 1e-5, V.size + 1)
+    x = PlantModel().simulate(TEST_RIG, V, period)[:, 0] + np.random.default_rng(seed).normal(0.0, 1e-5, V.size + 1)
     log = RampLog(np.arange(V.size + 1) * period, np.r_[V, 0.0], TEST_RIG.q_x * np.round(x / TEST_RIG.q_x), source=f"{rate} Hz")
     result = fit_parameters([log], PlantParameters.preset("none"))
     assert result.forward_ok  # was refused at 100 Hz (54 steps)
     for name in ("Beq", "force_gain"):  # measured within 0.3 % at both rates
         assert abs(result.values[name] / getattr(TEST_RIG, name) - 1) < 0.02, (name, result.values[name])
-    if rate == 200:  # at 100 Hz this log's replay misses by 4 steps (another noise seed's: 2.5), and says so: all bounded
+    # No determined value outside 3 sigmas. At 100 Hz with the second noise seed F1 (-5.6 %) and F2 (+4.3 %) were reported
+    # to +-0.3 % (z 19.6 and 13.6): a threshold's cost is a staircase, and the first step up said they were known
+    # (_polish.profile: now at least to where the cost stays within twice the answer's). Measured now: z <= 1.8.
+    for name in result.names:
+        if result.determination[name] == "determined":
+            error = abs(result.values[name] - getattr(TEST_RIG, name))
+            assert error <= 3 * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
+    if (rate, seed) == (200, 1):  # at 100 Hz this log's replay misses by 4 steps (another noise seed's: 2.5), and says so: all bounded
         assert result.forward_rms < 2.5 * TEST_RIG.q_x  # measured 1.1 steps
         for name in ("F1", "F2", "B"):  # measured 4-6 % off (docs/ta.md: read them to about 10 % at these rates)
             assert abs(result.values[name] / getattr(TEST_RIG, name) - 1) < 0.2, (name, result.values[name])
