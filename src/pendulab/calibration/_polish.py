@@ -222,8 +222,7 @@ def trend_filter(y: np.ndarray, weight: float, tol: float = 1e-4, max_iter: int 
         DTz = DT(z)
         DDTz = D(DTz)
         w = Dy - (mu1 - mu2)
-        primal = min(0.5 * dot(w, solveh_banded(banded(0.0), w)) + lam * np.sum(mu1 + mu2),
-                     0.5 * dot(DTz, DTz) + lam * np.sum(np.abs(Dy - DDTz)))
+        primal = min(0.5 * dot(w, solveh_banded(banded(0.0), w)) + lam * np.sum(mu1 + mu2), 0.5 * dot(DTz, DTz) + lam * np.sum(np.abs(Dy - DDTz)))
         dual = max(-0.5 * dot(DTz, DTz) + dot(Dy, z), dual)
         gap = primal - dual
         if gap <= tol * max(1.0, abs(dual)):
@@ -440,16 +439,8 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
 PAIRS = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain"))
 
 
-def polish(
-    logs: list[Anchors],
-    space: Space,
-    theta: np.ndarray,
-    max_iter: int = 12,
-    work: float = math.inf,
-    scan: tuple[str, ...] = ("F1", "F2", "v2"),
-    scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015),
-    scan_rounds: int = 2,
-) -> Polished:
+def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int = 12, work: float = math.inf,
+           scan: tuple[str, ...] = ("F1", "F2", "v2"), scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015), scan_rounds: int = 2) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
 
     The replay's error is not smooth in the parameters: a breakaway that happens or not is a jump, so

@@ -249,9 +249,7 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
         for v2 in (0.02, 0.05, 0.1):
             theta0 = np.clip([x[0], max(u_guess, 2e-4), Beq0, 20.0, v2, v2 / 10], lower, upper)
             try:
-                fit = least_squares(
-                    residual, theta0, bounds=(lower, upper), x_scale=[1e-3, 0.1, 1.0, 10.0, 0.01, 0.001], max_nfev=400
-                )
+                fit = least_squares(residual, theta0, bounds=(lower, upper), x_scale=[1e-3, 0.1, 1.0, 10.0, 0.01, 0.001], max_nfev=400)
             except (ValueError, FloatingPointError):
                 continue
             if best is None or fit.cost < best.cost:
@@ -293,12 +291,7 @@ def _fit_F2(log: RampLog, lo: int, hi: int, params: PlantParameters, F_low: floa
 
 
 # ---------------------------------------------------------------------- main entry
-def extract_friction(
-    log: RampLog,
-    mass_ratio: float = 1.0,
-    *,
-    params: PlantParameters | None = None,
-) -> FrictionEstimate:
+def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantParameters | None = None) -> FrictionEstimate:
     """Extract the friction vector from a ramp-test log (see the module docstring).
 
     Parameters
@@ -328,10 +321,8 @@ def extract_friction(
     pushes = _find_pushes(log)
     ramps = [p for p in pushes if abs(p.rate) < PROBE_RATE_THRESHOLD]
     if not ramps:
-        raise CalibrationError(
-            f"{where} ({log.duration:.3g} s) contains no voltage ramp from 0 V; record it with 'pendulab calibrate' "
-            "(slow ramps until the cart breaks away)"
-        )
+        raise CalibrationError(f"{where} ({log.duration:.3g} s) contains no voltage ramp from 0 V; record it with 'pendulab calibrate' "
+                               "(slow ramps until the cart breaks away)")
 
     notes: list[str] = []
     estimates: list[PushEstimate] = []
@@ -373,14 +364,10 @@ def extract_friction(
                 values["Beq"] = Beq
                 if v2 < 0.95 * u0:  # the cart coasted freely first: the drag phase started at v2
                     values.update(v2=v2, B=B, v1=v1 if v1 < 0.95 * v2 else None)
-        estimates.append(
-            PushEstimate(kind, direction, float(t[push.start]), float(t[min(push.release, len(t) - 1)]), F1=F1, decay_rms=rms, **values)
-        )
+        estimates.append(PushEstimate(kind, direction, float(t[push.start]), float(t[min(push.release, len(t) - 1)]), F1=F1, decay_rms=rms, **values))
     if not any(e.F1 is not None for e in estimates):
-        raise CalibrationError(
-            f"{where} ({log.duration:.3g} s) contains no breakaway: the cart never started moving on a ramp from rest; "
-            "the log is too short or the ramps stop too early"
-        )
+        raise CalibrationError(f"{where} ({log.duration:.3g} s) contains no breakaway: the cart never started moving on a ramp from rest; "
+                               "the log is too short or the ramps stop too early")
 
     measured: dict[str, float] = {}
     spread: dict[str, float] = {}

@@ -229,31 +229,23 @@ def _load_mat(path: Path) -> Calibration:
     source = f"calibration file {path}"
     numeric = {k: v for k, v in read_mat_variables(path, what=source).items() if v.dtype.kind in "fiub"}
     if numeric and all(v.size == 0 for v in numeric.values()):
-        raise CalibrationError(
-            f"{source} is empty (variable {', '.join(sorted(numeric))} holds no numbers); "
-            "save the friction vector [F1 v1 B unused] in it, or use a JSON calibration file"
-        )
+        raise CalibrationError(f"{source} is empty (variable {', '.join(sorted(numeric))} holds no numbers); "
+                               "save the friction vector [F1 v1 B unused] in it, or use a JSON calibration file")
     vectors = {k: np.asarray(v, dtype=float).ravel() for k, v in numeric.items() if v.size in (4, 5)}
     candidates = [k for k in vectors if "fric" in k.lower()] or list(vectors)
     if not candidates:
-        raise CalibrationError(
-            f"{source} holds no friction vector: expected one variable with 4 numbers [F1 v1 B unused] "
-            "(the old lab's format) or 5 numbers [F1 v1 F2 v2 B]"
-        )
+        raise CalibrationError(f"{source} holds no friction vector: expected one variable with 4 numbers [F1 v1 B unused] "
+                               "(the old lab's format) or 5 numbers [F1 v1 F2 v2 B]")
     if len(candidates) > 1:
-        raise CalibrationError(
-            f"{source} holds several 4/5-number vectors ({', '.join(sorted(candidates))}); keep only the friction vector in it"
-        )
+        raise CalibrationError(f"{source} holds several 4/5-number vectors ({', '.join(sorted(candidates))}); keep only the friction vector in it")
     name = candidates[0]
     vector = vectors[name]
     metadata: dict[str, Any] = {"source": str(path), "mat_variable": name, "method": "old lab .mat file"}
     if len(vector) == 4:
         F1, v1, B = (float(v) for v in vector[:3])
         values = [F1, v1, OLD_LAB_F2_FACTOR * F1, OLD_LAB_V2, B]
-        metadata["note"] = (
-            "4-number vector read as the old lab read it: [F1, v1, B, unused], "
-            f"F2 = {OLD_LAB_F2_FACTOR:g}*F1, v2 = {OLD_LAB_V2:g} m/s"
-        )
+        metadata["note"] = ("4-number vector read as the old lab read it: [F1, v1, B, unused], "
+                            f"F2 = {OLD_LAB_F2_FACTOR:g}*F1, v2 = {OLD_LAB_V2:g} m/s")
         metadata["old_lab_vector"] = [float(v) for v in vector]
     else:
         values = [float(v) for v in vector]

@@ -423,10 +423,8 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int])
 
 
 #: What to record instead of a log that determines nothing.
-RECORD_INSTEAD = (
-    "slow voltage ramps in both directions with rests between (the breakaway, F1: 'pendulab calibrate --log'), "
-    "fast steps (the drive and Beq) or a sine sweep (the slip region, B)"
-)
+RECORD_INSTEAD = ("slow voltage ramps in both directions with rests between (the breakaway, F1: 'pendulab calibrate --log'), "
+                  "fast steps (the drive and Beq) or a sine sweep (the slip region, B)")
 
 
 #: The coarsest sample period (s) the fit takes: a rig's log is sampled at 1 kHz or so; 1 s is a time in milliseconds.
@@ -450,8 +448,7 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
         if len(log) < 2 * interval_samples(log) + 1:
             raise CalibrationError(
                 f"{where} is too short to fit ({log.duration:.3g} s, {len(log)} samples); it needs at least two intervals of the state estimates "
-                "and should contain the cart breaking away and moving"
-            )
+                "and should contain the cart breaking away and moving")
         steps = np.diff(log.t)
         if np.max(np.abs(steps - log.period)) > 0.1 * log.period:
             k = int(np.argmax(np.abs(steps - log.period)))
@@ -477,10 +474,8 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
             raise FitRejected(f"{where}: the cart never moves (x spans {np.ptp(log.x) * 1e6:.0f} um), so the log determines nothing; "
                               f"{'leave it out, or ' if len(logs) > 1 else ''}record {RECORD_INSTEAD}")
         if np.ptp(log.V) <= 1e-3 * max(1.0, float(np.max(np.abs(log.V)))):
-            raise FitRejected(
-                f"{where}: the voltage is constant ({float(np.mean(log.V)):.3g} V), so the force gain, Beq and the friction "
-                f"cannot be told apart (a steady speed fits any of them); record {RECORD_INSTEAD}"
-            )
+            raise FitRejected(f"{where}: the voltage is constant ({float(np.mean(log.V)):.3g} V), so the force gain, Beq and the friction "
+                              f"cannot be told apart (a steady speed fits any of them); record {RECORD_INSTEAD}")
         if params0.Mp > 0:
             if log.alpha is None:
                 raise CalibrationError(f"{where} has no alpha column; fitting with a pendulum needs the logged angle (or use --pendulum none)")
@@ -586,10 +581,8 @@ def _observer_search(setup: _Setup) -> _Candidate:
         starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / setup.scales))
     found = _observer.search(searched, space, starts)
     rms_observed = math.sqrt(found.cost / sum(a.measured.size for a in searched)) * float(np.mean([a.sigma[0] for a in searched]))
-    setup.progress(
-        f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
-        f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um"
-    )
+    setup.progress(f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
+                   f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um")
     omega, vector = _observer.OMEGAS[-1], space.vectors(found.theta[None])
     for j, (e, a) in enumerate(zip(whole, replays)):
         gain = _observer.observer_gain(omega, e.log.period, outputs=a.measured.shape[1])
@@ -638,10 +631,8 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
         on_pieces = float(_polish.costs(searched, space, whole.theta[None])[0])
         result = result.then(_polish.Polished(whole.theta, on_pieces, on_pieces, whole.iterations, whole.replays), replays=1)
     rms = _replay_rms(setup, replays, result.theta)
-    setup.progress(
-        f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): "
-        f"cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um"
-    )
+    setup.progress(f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): "
+                   f"cost {result.start_cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
     return _Answer(candidate, result, searched, replays, rms)
 
 
@@ -869,8 +860,7 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         diverged_note = (
             f"the replay diverges in {np.unique(stretch[left_out]).size} of {n_stretches} stretches between restarts ({left_out.mean():.1%} "
             f"of the samples; the first at t = {np.concatenate([c.t for c in curves])[k]:.2f} s in {source[k]}), left out of the check: a breakaway "
-            "that a hair of drive decides does that (a noisy voltage, a force at its threshold), and so do values that are off there"
-        )
+            "that a hair of drive decides does that (a noisy voltage, a force at its threshold), and so do values that are off there")
 
     allowed = {n: (float(lo * s_), float(hi * s_)) for n, (lo, hi), s_ in zip(names, allowed_scaled, scales)}
     status, uncertainty, allowed, regime_note = split_of_the_drag(names, status, uncertainty, allowed, params, regimes)
@@ -1016,9 +1006,8 @@ def fit_parameters(
     return replace(_result(setup, answer, start_values, t_start), voltage_lag=voltage_lag)
 
 
-def confidence_of(
-    status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]], forward_rms: float, step: float
-) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
+def confidence_of(status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]], forward_rms: float,
+                  step: float) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What may be claimed of the answer, given how well it replays the logs.
 
     Parameters
@@ -1059,12 +1048,10 @@ def confidence_of(
         return tuple(status), np.asarray(sigma, dtype=float), dict(allowed), ""
     demoted = tuple(_polish.BOUNDED if s == _polish.DETERMINED else s for s in status)
     sigma = np.where([s == _polish.DETERMINED for s in status], math.inf, np.asarray(sigma, dtype=float))
-    note = (
-        f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within "
-        f"about 2): the search may have stopped in a wrong basin, so no parameter is reported determined and none gets "
-        f"an uncertainty or a range; fit again from an earlier calibration of this rig (--calibration FILE --start defaults: the search "
-        f"already tried the given start, the logs' own estimate and a global search from the start), or record motion that shows the drive and the drag: {RECORD_INSTEAD}"
-    )
+    note = (f"the answer misses the logs by {steps:.1f} encoder steps (RMS; the true values of a rig replay its logs within about 2): the search may "
+            f"have stopped in a wrong basin, so no parameter is reported determined and none gets an uncertainty or a range; fit again from an "
+            f"earlier calibration of this rig (--calibration FILE --start defaults: the search already tried the given start, the logs' own estimate "
+            f"and a global search from the start), or record motion that shows the drive and the drag: {RECORD_INSTEAD}")
     return demoted, sigma, {name: (0.0, math.inf) for name in allowed}, note
 
 
@@ -1094,10 +1081,8 @@ def slip_shares(params: PlantParameters, V: np.ndarray, states: np.ndarray) -> t
     return int(np.count_nonzero(inside)), int(np.count_nonzero(moving & ~inside))
 
 
-def split_of_the_drag(
-    names: Sequence[str], status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]],
-    params: PlantParameters, regimes: Sequence[tuple[int, int]],
-) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
+def split_of_the_drag(names: Sequence[str], status: Sequence[str], sigma: np.ndarray, allowed: dict[str, tuple[float, float]],
+        params: PlantParameters, regimes: Sequence[tuple[int, int]]) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What a log that never leaves the slip region cannot determine, whatever the profile around the answer says.
 
     Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE`
@@ -1133,12 +1118,10 @@ def split_of_the_drag(
     # Not the fitted v2 (on the unseen rig's triangle wave it stayed at 0.48 m/s, the rig's is 0.06): its lower bound.
     v2_low = allowed.get("v2", (0.0, math.inf))[0]
     outrun = f", above {v2_low:.3g} m/s by these logs" if "v2" in names and v2_low > 0 else ""
-    note = (
-        f"the cart moves beyond the slip region in only {beyond} of {moving} moving samples of the replay: the logs show "
-        f"the drag B + Beq = {total:.3g} N*s/m there, not how it splits, and the force gain, the forces and v1 only through "
-        f"the cart's inertia in the slip region's short transients, and v2 and F2 only from below, so {', '.join(n for n in names if n in SLIP_ONLY_UNDETERMINED)} "
-        f"are only bounded; record faster motion (larger voltages: the cart must outrun v2{outrun})"
-    )
+    note = (f"the cart moves beyond the slip region in only {beyond} of {moving} moving samples of the replay: the logs show the drag B + Beq = "
+            f"{total:.3g} N*s/m there, not how it splits, and the force gain, the forces and v1 only through the cart's inertia in the slip region's "
+            f"short transients, and v2 and F2 only from below, so {', '.join(n for n in names if n in SLIP_ONLY_UNDETERMINED)} are only bounded; "
+            f"record faster motion (larger voltages: the cart must outrun v2{outrun})")
     return tuple(status), sigma, allowed, note
 
 
@@ -1163,10 +1146,8 @@ def ramp_start(logs: Iterable[RampLog], params0: PlantParameters) -> tuple[Plant
             continue
         vectors.append({n: v for n, v in zip(FRICTION_NAMES, estimate.measured) if estimate.counts.get(n, 0) > 0})
     if not vectors:
-        return params0, (
-            "no ramp test to extract the friction from in the logs (fine: any motion will do); starting from the given "
-            "parameters and an estimate made from the logs themselves"
-        )
+        return params0, ("no ramp test to extract the friction from in the logs (fine: any motion will do); starting from the given "
+                         "parameters and an estimate made from the logs themselves")
     values = {n: float(np.mean([v[n] for v in vectors if n in v])) for n in FRICTION_NAMES if any(n in v for v in vectors)}
     merged = {**dict(zip(FRICTION_NAMES, params0.friction)), **values}
     merged["F2"] = max(merged["F2"], merged["F1"])

@@ -228,10 +228,8 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     if len(lines) > 1 and not text.endswith(("\n", "\r")):
         # Every writer ends its rows with a line end; a last row without one was cut off mid-write
         # (a crash, a full disk, a copy stopped early), possibly mid-number, which would read as a wrong value.
-        raise CalibrationError(
-            f"log {path}, line {lines[-1][0]}: the file ends in the middle of this row (no line end): it was cut off; "
-            f"delete that line (or add a line end if the row is complete) and run again"
-        )
+        raise CalibrationError(f"log {path}, line {lines[-1][0]}: the file ends in the middle of this row (no line end): it was cut off; "
+                               f"delete that line (or add a line end if the row is complete) and run again")
     header = [h.strip() for h in split(header_line)]
     if any(_is_number(h) for h in header):
         raise CalibrationError(f"log {path} has no header line; the first line must name the columns, e.g. 't,V,x'")
@@ -370,9 +368,7 @@ def _two_column(path: Path) -> np.ndarray:
     arrays = [np.asarray(v, dtype=float) for v in variables.values() if v.dtype.kind in "fiub" and v.ndim == 2 and 2 in v.shape and v.size > 4]
     if len(arrays) != 1:
         found = ", ".join(f"{k} {tuple(v.shape)}" for k, v in variables.items()) or "no variables"
-        raise CalibrationError(
-            f"old-lab log file {path} must hold one two-column [t, value] array (found: {found})"
-        )
+        raise CalibrationError(f"old-lab log file {path} must hold one two-column [t, value] array (found: {found})")
     data = arrays[0] if arrays[0].shape[1] == 2 else arrays[0].T
     data = data[np.all(np.isfinite(data), axis=1)]
     data = data[np.argsort(data[:, 0], kind="stable")]
@@ -426,9 +422,7 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         raise CalibrationError(f"old-lab log folder {folder} does not exist or is not a folder")
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".mat" and p.is_file())
     if not files:
-        raise CalibrationError(
-            f"old-lab log folder {folder} holds no .mat files; expected one .mat per signal (angle, position, voltage)"
-        )
+        raise CalibrationError(f"old-lab log folder {folder} holds no .mat files; expected one .mat per signal (angle, position, voltage)")
     found: dict[str, Path] = {}
     for file in files:
         # by the file's name, else by its variables' names
@@ -436,17 +430,13 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         if signal is None:
             continue  # another file in the folder
         if signal in found:
-            raise CalibrationError(
-                f"old-lab log folder {folder} has two {signal} files ({found[signal].name}, {file.name}); keep one per signal"
-            )
+            raise CalibrationError(f"old-lab log folder {folder} has two {signal} files ({found[signal].name}, {file.name}); keep one per signal")
         found[signal] = file
     missing = [s for s in ("alpha", "x", "voltage") if s not in found]
     if missing:
         label = {"alpha": "angle", "x": "position", "voltage": "voltage"}
-        raise CalibrationError(
-            f"old-lab log folder {folder} has no {', '.join(label[m] for m in missing)} file "
-            f"(found: {', '.join(p.name for p in files)}); name the files angle.mat, position.mat, voltage.mat"
-        )
+        raise CalibrationError(f"old-lab log folder {folder} has no {', '.join(label[m] for m in missing)} file "
+                               f"(found: {', '.join(p.name for p in files)}); name the files angle.mat, position.mat, voltage.mat")
     data = {signal: _two_column(file) for signal, file in found.items()}
     t0 = max(d[0, 0] for d in data.values())
     t1 = min(d[-1, 0] for d in data.values())
@@ -455,10 +445,8 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     short = min(spans, key=spans.__getitem__)
     if spans[short] < 0.5 * longest:
         # The signals are used where all of them were logged: one cut short would silently cut the others.
-        raise CalibrationError(
-            f"old-lab log folder {folder}: {found[short].name} covers {spans[short]:.3g} s but the other signals "
-            f"{longest:.3g} s; it looks cut short (copied or saved incompletely): replace it with the complete file"
-        )
+        raise CalibrationError(f"old-lab log folder {folder}: {found[short].name} covers {spans[short]:.3g} s but the other signals "
+                               f"{longest:.3g} s; it looks cut short (copied or saved incompletely): replace it with the complete file")
     if not t1 > t0:
         raise CalibrationError(f"old-lab log folder {folder}: the signals do not overlap in time; they must come from one run")
     period = min(float(np.median(np.diff(d[:, 0]))) for d in data.values())

@@ -129,9 +129,7 @@ class _Run:
                 voltage = float(np.clip(-s.centre_gain * x - s.centre_integral * integral, -s.centre_max_voltage, s.centre_max_voltage))
             self.apply(voltage)
         self.note("timeout centring the cart")
-        raise CalibrationError(
-            f"the cart could not be centred within {s.phase_timeout:g} s (x={self.position * 1e3:.1f} mm); check the rig"
-        )
+        raise CalibrationError(f"the cart could not be centred within {s.phase_timeout:g} s (x={self.position * 1e3:.1f} mm); check the rig")
 
     def ramp(self, direction: int, rate: float, target: float, distance: float) -> float | None:
         """Ramp at ``rate`` towards ``direction*target``; stop after moving ``distance`` past breakaway.

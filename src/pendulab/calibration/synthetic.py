@@ -124,8 +124,7 @@ def closed_loop_params(rig: PlantParameters = TRUE) -> PlantParameters:
     return PlantParameters.preset("long", poke_magnitude=150.0, poke_duration=0.005, poke_start=1.0, **friction)
 
 
-def closed_loop_log(rig: PlantParameters = TRUE, duration: float = 8.0, *, noise: float = 1e-5, voltage_noise: float = 0.0,
-                    seed: int = 0) -> RampLog:
+def closed_loop_log(rig: PlantParameters = TRUE, duration: float = 8.0, *, noise: float = 1e-5, voltage_noise: float = 0.0, seed: int = 0) -> RampLog:
     """A closed-loop run with the long pendulum up: the demo controller through the FMUs, poked at 1 s.
 
     The angle and position are quantized as the encoders give them; the voltage is the applied one.
