@@ -505,8 +505,7 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
 #: The slip region's corner: the cart leaves it at ``F2`` of drive or ``v2`` of speed, whichever comes first, so
 #: one moved alone shifts every exit and the replay's cost runs in a narrow valley along the pair (:func:`valley`).
 PARTNERS = {"F2": "v2", "v2": "F2"}
-#: How far (log) a partner is scanned: a force finely, a speed widely (along the corner 1 % of ``F2`` is
-#: worth about 12 % of ``v2``).
+#: How far (log) a partner is scanned: a force finely, a speed widely (along the corner 1 % of ``F2`` is worth about 12 % of ``v2``).
 PARTNER_SPANS = {"F2": 0.03, "v2": 0.3}
 
 

@@ -32,9 +32,8 @@ from pendulab.native import shared_library
 # on a busy machine a spinning thread takes the core another process needs.
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
-#: IEEE arithmetic as written, whatever the compiler or CPU: no reassociation and no fused multiply-add.
-#: Each parameter set is one vector lane's from start to end, so the same log replays to the same bits on any
-#: x86-64 machine, vector width and thread count: those of CasADi's virtual machine.
+#: IEEE arithmetic as written, whatever the compiler or CPU: no reassociation and no fused multiply-add. Each parameter set is one vector lane's from
+#: start to end, so the same log replays to the same bits on any x86-64 machine, vector width and thread count: those of CasADi's virtual machine.
 EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
 
 #: Groups of lanes interleaved in one thread (:func:`pendulab.simd.statements`): each thread takes WAYS x LANES

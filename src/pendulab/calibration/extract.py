@@ -334,8 +334,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
         rest = x[max(0, push.start - 50) : push.start + 1]
         noise = float(np.std(rest - np.median(rest)))
         threshold = max(3 * q, 6 * noise, 1e-6)
-        # Breakaway: the cart covers `threshold` within 20 ms (a slow glide of a not quite stopped
-        # cart does not), in the direction of the voltage.
+        # Breakaway: the cart covers `threshold` within 20 ms (a slow glide of a not quite stopped cart does not), in the direction of the voltage.
         lo, hi = max(push.start - w, 0), push.release
         if hi - lo <= w:
             continue

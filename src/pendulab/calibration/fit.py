@@ -150,8 +150,7 @@ class FitResult:
     determination: dict[str, str] = field(default_factory=dict)
     #: Per fitted parameter: the range ``(low, high)`` over which the replay stays as good (0 or inf: no limit).
     allowed: dict[str, tuple[float, float]] = field(default_factory=dict)
-    #: Why a parameter the profile found determined is reported otherwise (see :func:`confidence_of` and
-    #: :func:`split_of_the_drag`); "" if none is.
+    #: Why a parameter the profile found determined is reported otherwise (see :func:`confidence_of` and :func:`split_of_the_drag`); "" if none is.
     confidence: str = ""
     #: Seconds of the logs the search saw: all of them, or of long logs the pieces where the cart stops and starts most.
     searched_seconds: float = math.inf
@@ -273,11 +272,10 @@ FORWARD_LIMIT_STEPS = 20.0
 CONFIDENT_STEPS = 3.0
 
 
-#: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a
-#: hair of drive decides. On a 300 s log of random steps with 10 mV of voltage noise the rig's true values diverge in
-#: a few stretches (1.2 % of the samples, by up to 95 mm) and replay the others within 1.1 steps. Up to this share of
-#: the samples such stretches are named and left out of the check (:func:`_diverged`); more, and they count. One
-#: stretch may be 3 % of a short log (random steps on the unseen rig with 10 mV, 16 s: 1 of 27 stretches).
+#: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a hair of drive decides. On a 300 s
+#: log of random steps with 10 mV of voltage noise the rig's true values diverge in a few stretches (1.2 % of the samples, by up to 95 mm) and replay
+#: the others within 1.1 steps. Up to this share of the samples such stretches are named and left out of the check (:func:`_diverged`); more, and they
+#: count. One stretch may be 3 % of a short log (random steps on the unseen rig with 10 mV, 16 s: 1 of 27 stretches).
 DIVERGED_SHARE = 0.05
 
 
@@ -323,9 +321,8 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
 SCAN_CYCLES = 3
 SCAN_GAIN = 0.02
 SCAN_ABOVE_STEPS = 2.0
-#: The stick speed ``v1`` is reported bounded, never determined, within its profile's range widened by this
-#: factor either way: it shows only in how a stopping cart creeps, and the others' moves make up for it (7 of
-#: 20 corpus fits where the profile called it determined were 10 to 21 % off).
+#: The stick speed ``v1`` is reported bounded, never determined, within its profile's range widened by this factor either way: it shows only in how a
+#: stopping cart creeps, and the others' moves make up for it (7 of 20 corpus fits where the profile called it determined were 10 to 21 % off).
 V1_SCATTER = 1.3
 #: One walk along the valley of v2 and F2 (:func:`_polish.walk`) is polished from if it lowers the cost by this share.
 WALK_GAIN = 0.01
@@ -339,18 +336,16 @@ EVOLVE_SEEDS = (19, 20)
 #: ~700 sets over 20 s of log, a bound on its time that, unlike a clock, gives the same answer on a busy machine.
 POLISH_ITER = 12
 POLISH_WORK = 1.4e7
-#: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the global search (:func:`_evolved`):
-#: CMA-ES on the replay from the start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each
-#: seed while it still misses. On the unseen rig's triangle wave, stopped at 4.5 steps with B folded into Beq, 3 of 8
-#: seeds found the rig's basin (a cost 0.3-0.5 times the true values'), the others none better; about 9 CPU-s each.
-#: With 10 mV on its voltage 1 of 8 did (seed 4; seed 7 found B + Beq in B alone, 1.18 steps). A seed still above the
+#: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the global search (:func:`_evolved`): CMA-ES on the replay from the
+#: start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each seed while it still misses. On the unseen rig's triangle
+#: wave, stopped at 4.5 steps with B folded into Beq, 3 of 8 seeds found the rig's basin (a cost 0.3-0.5 times the true values'), the others none
+#: better; about 9 CPU-s each. With 10 mV on its voltage 1 of 8 did (seed 4; seed 7 found B + Beq in B alone, 1.18 steps). A seed still above the
 #: answer's cost halfway gives up (the three that found it were below by generation 46-72), after 4.5 CPU-s on a 16 s log.
 GLOBAL_ABOVE_STEPS = 2.0
-#: Where the answer still misses (GLOBAL_ABOVE_STEPS), the thresholds are first scanned from the logs' own estimate with
-#: F2 out of the way (times RESCAN_F2), each of RESCAN's (name, log span) over RESCAN_POINTS, RESCAN_ROUNDS times, then
-#: evolved and polished (:func:`_rescanned`). The sticky rig's slow ramps (its cart leaves the slip region at v2, then
-#: slides at 0.3 m/s): v2 0.2 % off the truth multiplies the replay cost by 600, F1 0.5 % by 57, and every search from
-#: a start a few % off (the estimate: v2 +8.9 %) ended where F2 (-36 %) triggers the escape instead, at 3.5 steps.
+#: Where the answer still misses (GLOBAL_ABOVE_STEPS), the thresholds are first scanned from the logs' own estimate with F2 out of the way (times
+#: RESCAN_F2), each of RESCAN's (name, log span) over RESCAN_POINTS, RESCAN_ROUNDS times, then evolved and polished (:func:`_rescanned`). The sticky
+#: rig's slow ramps (its cart leaves the slip region at v2, then slides at 0.3 m/s): v2 0.2 % off the truth multiplies the replay cost by 600,
+#: F1 0.5 % by 57, and every search starting a few % off (the estimate: v2 +8.9 %) ended where F2 (-36 %) triggers the escape instead, at 3.5 steps.
 RESCAN = (("v2", 0.2), ("F1", 0.1), ("v1", 1.5), ("v2", 0.02), ("F1", 0.02))
 RESCAN_POINTS = 64
 RESCAN_ROUNDS = 2
@@ -358,14 +353,13 @@ RESCAN_F2 = 2.0
 GLOBAL_SEEDS = (1, 2, 3, 4)
 GLOBAL_SIGMA = 1.0
 GLOBAL_GENERATIONS = 200
-#: A logged voltage may lead or lag what the motor got (loggers differ on whether a row holds the voltage applied from
-#: its time on or the one that brought the cart there). Where the answer misses by more than LAG_ABOVE_STEPS, a shift
-#: :func:`_voltage_lag` finds (LAG_PROBE_ITER observer iterations) is fitted again (then probed a sample further, up to
-#: MAX_LAG), kept if the logs replay within LAG_KEEP times the answer's RMS. Random steps and a chirp (12 s), the voltage
-#: a sample early or late, missed by 2.9-4.9 steps (random steps: every value 2-26 % off, called determined); the shift
-#: cost 0.54-0.73 times, the wrong one 1.8-2.4, logs without a lag 1.0-2.0 (slow ramps, sweeps, the closed loop, with
-#: and without voltage noise); fitted shifted, 0.7-0.8 steps, also 2 and 3 samples off. The replay polished as the probe
-#: missed the chirp's shift (1.7 times) and took slow ramps' wrong one (0.66).
+#: A logged voltage may lead or lag what the motor got (loggers differ on whether a row holds the voltage applied from its time on or the one that
+#: brought the cart there). Where the answer misses by more than LAG_ABOVE_STEPS, a shift :func:`_voltage_lag` finds (LAG_PROBE_ITER observer
+#: iterations) is fitted again (then probed a sample further, up to MAX_LAG), kept if the logs replay within LAG_KEEP times the answer's RMS. Random
+#: steps and a chirp (12 s), the voltage a sample early or late, missed by 2.9-4.9 steps (random steps: every value 2-26 % off, called determined);
+#: the shift cost 0.54-0.73 times, the wrong one 1.8-2.4, logs without a lag 1.0-2.0 (slow ramps, sweeps, the closed loop, with and without voltage
+#: noise); fitted shifted, 0.7-0.8 steps, also 2 and 3 samples off. The replay polished as the probe missed the chirp's shift (1.7 times) and took
+#: slow ramps' wrong one (0.66).
 LAG_ABOVE_STEPS = 2.0
 LAG_PROBE_ITER = 8
 LAG_GAIN = 0.9
