@@ -205,7 +205,7 @@ def test_a_closed_loop_log_a_sample_off_is_fitted_with_uncertainties_that_hold_t
     for name in determined:
         error = abs(result.values[name] - getattr(true, name))
         assert error <= 3 * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
-    assert "a sample either way" in result.uncertainty_method
+    assert "the voltage's alignment" in result.uncertainty_method
 
 
 def test_a_cart_log_a_sample_off_that_replays_well_counts_the_shift_in_its_uncertainties():
@@ -221,7 +221,7 @@ def test_a_cart_log_a_sample_off_that_replays_well_counts_the_shift_in_its_uncer
     log, true = case.log(), case.params
     result = fit_parameters([replace(log, V=shifted_voltage(log.V, 1))], PlantParameters.preset("none"))
     assert result.forward_rms < 2.0 * true.q_x and result.voltage_lag == 0  # measured 1.42 steps
-    assert "a sample either way" in result.uncertainty_method
+    assert "the voltage's alignment" in result.uncertainty_method
     determined = [n for n in result.names if result.determination[n] == "determined"]
     assert {"Beq", "force_gain"} <= set(determined)
     for name in determined:
@@ -232,4 +232,20 @@ def test_a_cart_log_a_sample_off_that_replays_well_counts_the_shift_in_its_uncer
 def test_the_voltage_alignment_does_not_widen_a_cart_log_that_tells_it(open_loop):
     # Random steps and a chirp on time: each shift, after its Gauss-Newton step, replays at 3 to 45 times the cost.
     log, result, _ = open_loop
-    assert "a sample either way" not in result.uncertainty_method
+    assert "the voltage's alignment" not in result.uncertainty_method
+
+
+def test_a_log_that_starts_with_a_breakaway_counts_its_first_state_in_the_uncertainties():
+    # A triangle wave from 3 V at its first sample on a rig of the helper's audit (session 22): the smoothed first speed
+    # (5 mm/s: the smoothing's edge) makes the replay miss the first stretch by 450 um; the true values replay at 3.9
+    # steps, and the answer (1.35 steps) had v2 -19 % and B -10 % at z 7.0 and 3.1. Started at rest instead, the answer
+    # moves by as much (fit.FIRST_AT_REST): measured now, B bounded and z <= 1.2.
+    rig = PlantParameters.preset("none", Beq=2.724, force_gain=0.7006, F1=0.6629, v1=0.005977, F2=1.1506, v2=0.03385, B=40.44)
+    log = synthetic_log("triangle", rig, duration=16.0, voltage_noise=0.0)
+    result = fit_parameters([log], PlantParameters.preset("none"))
+    assert result.forward_ok and "the first state's speed" in result.uncertainty_method
+    determined = [n for n in result.names if result.determination[n] == "determined"]
+    assert {"Beq", "force_gain"} <= set(determined)
+    for name in determined:
+        error = abs(result.values[name] - getattr(rig, name))
+        assert error <= 3 * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
