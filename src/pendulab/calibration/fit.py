@@ -379,7 +379,7 @@ LAG_SPREAD_SHIFTS = (-1, 1)
 LAG_TOLD = 1.25
 #: A log's first state is the smoothed one (its speed the smoothing's edge, which makes a cart that breaks away there
 #: 0.005-0.015 m/s fast): where its speed is between this (m/s) and MOVING_START, the answer's move with the cart at rest
-#: there instead counts in the uncertainties as a lag does (:func:`_spread`, LAG_TOLD). A triangle wave from 3 V at its
+#: there instead counts in the uncertainties, whatever it costs (:func:`_spread`). A triangle wave from 3 V at its
 #: first sample: the replay misses its first stretch by 450 um, the true values replay at 3.9 steps, the answer 1.35
 #: with v2 -19 % and B -10 % at z 7 and 3. (Started at rest outright the true values replay at 0.84, but 14 of the
 #: corpus's 32 answers moved and 4 failed the bar that passed.)
@@ -758,8 +758,10 @@ def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[
     """How far (scaled) each of the ``determined`` parameters moves, the largest over what the logs may not tell (the voltage
     shifted by :data:`LAG_SPREAD_SHIFTS` samples; a log that starts with the cart moving slower than :data:`MOVING_START`,
     started at rest instead: :data:`FIRST_AT_REST`): one Gauss-Newton step from ``theta`` each (central differences of
-    relative step 3e-3, as :func:`_polish.profile`'s), the others held. A variant after whose step the logs still replay
-    at ``told`` times the cost or more is told apart by them and not counted. Zero for the rest; and what counted."""
+    relative step 3e-3, as :func:`_polish.profile`'s), the others held. A shift after whose step the logs still replay at
+    ``told`` times the cost or more is told apart by them and not counted; the first state at rest always counts (the
+    answer adapted to the smoothed one, so one step does not show how well the logs replay from rest). Zero for the
+    rest; and what counted."""
     spread, counted = np.zeros(theta.size), []
     if not determined:
         return spread, counted
