@@ -439,6 +439,13 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
 PAIRS = (("F2", "v2"), ("F1", "F2"), ("Beq", "force_gain"))
 
 
+def along(space: Space, theta: np.ndarray, j: int, factors: np.ndarray) -> np.ndarray:
+    """``theta`` with its ``j``-th value times each of ``factors``, projected (:meth:`Space.project`): one row per factor."""
+    trials = np.tile(theta, (len(factors), 1))
+    trials[:, j] = theta[j] * factors
+    return np.array([space.project(th) for th in trials])
+
+
 def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int = 12, work: float = math.inf,
            scan: tuple[str, ...] = ("F1", "F2", "v2"), scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015), scan_rounds: int = 2) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
@@ -475,9 +482,7 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
         for span in scan_spans:
             if done["samples"] > work:
                 break
-            trials = np.tile(scanned, (15, 1))
-            trials[:, j] = scanned[j] * np.exp(np.linspace(-math.log1p(span), math.log1p(span), 15))
-            trials = np.array([project(th) for th in trials])
+            trials = along(space, scanned, j, np.exp(np.linspace(-math.log1p(span), math.log1p(span), 15)))
             scanned = trials[int(np.argmin(cost_of(trials)))]
     if scanned is not theta and (c := float(cost_of(scanned[None])[0])) < cost:
         theta, cost = scanned, c
