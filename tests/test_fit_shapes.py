@@ -22,6 +22,15 @@ from pendulab.model.parameters import PlantParameters
 WITHIN = {"Beq": 0.05, "force_gain": 0.05, "F1": 0.10, "F2": 0.10, "B": 0.10}
 
 
+def determined_within(result, true: PlantParameters, sigmas: float) -> set[str]:
+    """Asserts that every parameter ``result`` calls determined lies within ``sigmas`` of its uncertainties of ``true``'s; returns their names."""
+    determined = {n for n in result.names if result.determination[n] == "determined"}
+    for name in determined:
+        error = abs(result.values[name] - getattr(true, name))
+        assert error <= sigmas * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
+    return determined
+
+
 def relative_errors(result, true: PlantParameters) -> dict[str, float]:
     return {n: result.values[n] / getattr(true, n) - 1 for n in WITHIN}
 
@@ -151,10 +160,7 @@ def test_a_log_sampled_at_100_or_200_hz_fits(rate, seed):
     # No determined value outside 3 sigmas. At 100 Hz with the second noise seed F1 (-5.6 %) and F2 (+4.3 %) were reported
     # to +-0.3 % (z 19.6 and 13.6): a threshold's cost is a staircase, and the first step up said they were known
     # (_polish.profile: now at least to where the cost stays within twice the answer's). Measured now: z <= 1.8.
-    for name in result.names:
-        if result.determination[name] == "determined":
-            error = abs(result.values[name] - getattr(TEST_RIG, name))
-            assert error <= 3 * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
+    determined_within(result, TEST_RIG, 3.0)
     if (rate, seed) == (200, 1):  # at 100 Hz this log's replay misses by 4 steps (another noise seed's: 2.5), and says so: all bounded
         assert result.forward_rms < 2.5 * TEST_RIG.q_x  # measured 1.1 steps
         for name in ("F1", "F2", "B"):  # measured 4-6 % off (docs/ta.md: read them to about 10 % at these rates)
@@ -200,11 +206,7 @@ def test_a_closed_loop_log_a_sample_off_is_fitted_with_uncertainties_that_hold_t
     start = true.with_values(**{n: getattr(lab, n) for n in ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")})  # the lab's friction and drive
     result = fit_parameters([replace(log, V=shifted_voltage(log.V, 1))], start)
     assert result.forward_ok
-    determined = [n for n in result.names if result.determination[n] == "determined"]
-    assert {"Beq", "force_gain"} <= set(determined)
-    for name in determined:
-        error = abs(result.values[name] - getattr(true, name))
-        assert error <= 3 * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
+    assert {"Beq", "force_gain"} <= determined_within(result, true, 3.0)
     assert "the voltage's alignment" in result.uncertainty_method
 
 
@@ -222,11 +224,7 @@ def test_a_cart_log_a_sample_off_that_replays_well_counts_the_shift_in_its_uncer
     result = fit_parameters([replace(log, V=shifted_voltage(log.V, 1))], PlantParameters.preset("none"))
     assert result.forward_rms < 2.0 * true.q_x and result.voltage_lag == 0  # measured 1.42 steps
     assert "the voltage's alignment" in result.uncertainty_method
-    determined = [n for n in result.names if result.determination[n] == "determined"]
-    assert {"Beq", "force_gain"} <= set(determined)
-    for name in determined:
-        z = abs(result.values[name] - getattr(true, name)) / result.uncertainty[name]
-        assert z <= 1.5, (name, result.values[name], result.uncertainty[name])
+    assert {"Beq", "force_gain"} <= determined_within(result, true, 1.5)
 
 
 def test_the_voltage_alignment_does_not_widen_a_cart_log_that_tells_it(open_loop):
@@ -244,8 +242,4 @@ def test_a_log_that_starts_with_a_breakaway_counts_its_first_state_in_the_uncert
     log = synthetic_log("triangle", rig, duration=16.0, voltage_noise=0.0)
     result = fit_parameters([log], PlantParameters.preset("none"))
     assert result.forward_ok and "the first state's speed" in result.uncertainty_method
-    determined = [n for n in result.names if result.determination[n] == "determined"]
-    assert {"Beq", "force_gain"} <= set(determined)
-    for name in determined:
-        error = abs(result.values[name] - getattr(rig, name))
-        assert error <= 3 * result.uncertainty[name], (name, result.values[name], result.uncertainty[name])
+    assert {"Beq", "force_gain"} <= determined_within(result, rig, 3.0)
