@@ -77,7 +77,8 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer, 
     """The replay (with restarts) and the observer of the position and the angle, built for 1, 2, 4 and 8 lanes
     in one group or 4 interleaved, against the same step evaluated in CasADi's virtual machine: equal bit for bit,
     for the pendulum's sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them).
-    A 1 kHz log, and one of 3 ms (30 sub-steps a sample, run as 3 chunks of 10)."""
+    A 1 kHz log, and one of 3 ms (30 sub-steps a sample, run as 3 chunks of 10). Each build is checked on the replay
+    and on the observer, at each rate (two builds a case: gcc's time is most of this test's)."""
     import casadi as ca
     import numpy as np
 
@@ -107,7 +108,7 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer, 
         per_sample = [log.V[None], log.t[None], r[None], sr.T]
         outputs = [np.empty((5, n, 4))]
     vm = _replay._in_vm(_replay._sample(*key, observer), x0, per_sample, P, h)
-    for lanes, ways in ((1, 1), (2, 4), (4, 4), (8, 1)):
+    for lanes, ways in ((1, 1), (4, 4)) if (observer == 0) == (stride == 1) else ((2, 4), (8, 1)):
         run = _replay._load(_replay._source(*key, observer, ways), f"pendulab_lanes_test_{observer}", ("-O2", f"-DLANES={lanes}"))
         assert run is not None, "no C compiler"
         arrays = [np.ascontiguousarray(a, dtype=float) for a in inputs]
