@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pendulab import exact
 from pendulab.calibration._polish import Anchors, Space, scan_directions
 from pendulab.calibration._replay import observe, sample_period
 
@@ -87,7 +88,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
 
     z = np.log(np.maximum(space.project(np.asarray(theta, dtype=float).copy()), FLOOR))
     r = prediction_errors(logs, space, to_theta(z), omega)[0]
-    cost, damping, it = float(r @ r), 1e-2, 0
+    cost, damping, it = float(np.einsum("i,i->", r, r)), 1e-2, 0
     n = len(z)
     for it in range(1, max_iter + 1):
         moves = DIFFERENCE * np.eye(n)
@@ -96,7 +97,7 @@ def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, o
         # einsum, not BLAS: the same sums in the same order on any machine and thread count.
         A, g = np.einsum("ki,kj->ij", J, J), np.einsum("ki,k->i", J, r)
         scale = np.diag(A) + 1e-12
-        trials = np.array([np.clip(z - np.linalg.solve(A + d * np.diag(scale), g), lower, upper) for d in damping * LADDER])
+        trials = np.array([np.clip(z - exact.solve(A + d * np.diag(scale), g), lower, upper) for d in damping * LADDER])
         R = prediction_errors(logs, space, to_theta(trials), omega)
         costs = np.einsum("ij,ij->i", R, R)
         best = int(np.argmin(costs))

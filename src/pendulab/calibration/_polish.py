@@ -16,6 +16,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from pendulab import exact
 from pendulab.calibration._replay import replay
 from pendulab.model.parameters import PlantParameters
 
@@ -145,7 +146,7 @@ def settled(a: Anchors, vector: np.ndarray, free: tuple[str, ...] | None, iterat
         for w, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
             Jw, ew = J[lo:hi].reshape(-1, 4), E[lo:hi].ravel()
             A, g = np.einsum("ki,kj->ij", Jw, Jw), np.einsum("ki,k->i", Jw, ew)  # einsum: the same sums on any machine
-            trial[w] -= np.linalg.solve(A + 1e-9 * np.trace(A) * np.eye(4) + 1e-30 * np.eye(4), g)
+            trial[w] -= exact.solve(A + 1e-9 * np.trace(A) * np.eye(4) + 1e-30 * np.eye(4), g)
         E_trial = errors(trial)
         cost_trial = stretch_costs(E_trial)
         better = cost_trial < cost
@@ -751,7 +752,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     base = 1 + 2 * n * m + 2 * m * len(joint)
     if determined:
         J = ((R[base : base + n] - R[base + n : base + 2 * n]) / (2 * size[:, None])).T[:, determined]
-        inverse = np.linalg.pinv(J.T @ J)  # times the threshold: the linearized covariance
+        inverse = exact.lstsq(exact.dot(J.T, J), np.eye(len(determined)))  # times the threshold: the linearized covariance
         # Cluster-robust (sandwich) covariance with the stretches between restarts as clusters: a replay's
         # errors within a stretch share one cause (a breakaway early or late, a restart's state), and the
         # model's own errors pull each stretch its own way; their scatter is an uncertainty too.
@@ -759,7 +760,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         scores = np.zeros((int(clusters.max()) + 1, len(determined)))
         np.add.at(scores, clusters, J * r0[:, None])
         S = scores.shape[0]
-        robust = inverse @ (scores.T @ scores) @ inverse * (S / max(S - len(determined), 1))
+        robust = exact.dot(exact.dot(inverse, exact.dot(scores.T, scores)), inverse) * (S / max(S - len(determined), 1))
         sigma[determined] = np.maximum(sigma[determined], np.sqrt(np.clip(np.maximum(np.diag(inverse * threshold), np.diag(robust)), 0.0, None)))
     for i, d in enumerate(joint):
         up, down = reach(1 + 2 * n * m + 2 * i * m)

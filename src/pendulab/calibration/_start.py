@@ -27,6 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
+from pendulab.exact import dot, lstsq, savgol
 from pendulab.calibration.extract import motor_constants
 from pendulab.calibration.logs import RampLog
 from pendulab.errors import ParameterError
@@ -48,8 +49,6 @@ def _motion(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarra
     (Savitzky-Golay, cubic.) The filter is linear, so the smoothed signals obey the same linear
     equation as the raw ones: smoothing the acceleration but not the voltage would not (at a step).
     """
-    from scipy.signal import savgol_filter
-
     out: list[list[np.ndarray]] = [[], [], [], []]
     for log in logs:
         V = np.clip(log.V, -params.V_max, params.V_max)
@@ -59,7 +58,7 @@ def _motion(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarra
             v = np.gradient(log.x, log.t)
             smoothed = (v, np.gradient(v, log.t), V)
         else:
-            smoothed = tuple(savgol_filter(y, window, 3, deriv=d, delta=log.period) for y, d in ((log.x, 1), (log.x, 2), (V, 0)))
+            smoothed = tuple(savgol(y, window, 3, deriv=d, delta=log.period) for y, d in ((log.x, 1), (log.x, 2), (V, 0)))
         for column, values in zip(out, (*smoothed, np.abs(log.V) < 0.98 * params.V_max)):
             column.append(values[edge : len(log) - edge])
     return tuple(np.concatenate(column) for column in out)
@@ -89,9 +88,9 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     for _ in range(6):
         ridge = 1e-3 * np.count_nonzero(use)
         M = np.vstack([A[use] / scale, math.sqrt(ridge) * np.eye(2)])
-        z, *_ = np.linalg.lstsq(M, np.r_[y[use], math.sqrt(ridge) * prior * scale], rcond=None)
+        z = lstsq(M, np.r_[y[use], math.sqrt(ridge) * prior * scale])
         solution = z / scale
-        residual = np.abs(A @ solution - y)
+        residual = np.abs(dot(A, solution) - y)
         grown = residual <= 3.0 * (1.4826 * float(np.median(residual[use])) + 1e-9)  # within three robust spreads
         if np.array_equal(grown, use) or np.count_nonzero(grown) < 20:
             break

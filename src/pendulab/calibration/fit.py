@@ -73,6 +73,7 @@ from typing import Any, Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
+from pendulab import exact
 from pendulab.calibration import _observer, _polish, _replay
 from pendulab.calibration._start import log_start
 from pendulab.calibration.extract import extract_friction, motor_constants
@@ -303,14 +304,12 @@ def _noise_level(x: np.ndarray) -> float:
 
 def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
     """Smoothed positions and speeds (and angles) at every sample, ``(n, n_states)``."""
-    from scipy.signal import savgol_filter
-
     n = len(log)
     window = min(31, n - (1 - n % 2))  # odd
 
     def smoothed(y: np.ndarray) -> list[np.ndarray]:
         if window >= 5:
-            return [savgol_filter(y, window, 3), savgol_filter(y, window, 3, deriv=1, delta=log.period)]
+            return [exact.savgol(y, window, 3), exact.savgol(y, window, 3, deriv=1, delta=log.period)]
         return [y, np.gradient(y, log.t)]
 
     return np.column_stack(smoothed(log.x) + (smoothed(log.alpha) if with_pendulum else []))  # a pendulum's log has alpha (_check_logs)
@@ -779,8 +778,8 @@ def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[
     for name, anchors in variants.items():
         for varied in anchors:
             e = errors(varied, theta[None])[0]
-            step = np.linalg.lstsq(J, -(e - R[0]), rcond=None)[0]
-            if name != "the voltage's alignment" or (e + J @ step) @ (e + J @ step) < told * (R[0] @ R[0]):
+            step = exact.lstsq(J, -(e - R[0]))
+            if name != "the voltage's alignment" or np.sum((e + exact.dot(J, step)) ** 2) < told * np.sum(R[0] ** 2):
                 spread[determined] = np.maximum(spread[determined], np.abs(step))
                 counted += [name] if name not in counted else []
     return spread, counted

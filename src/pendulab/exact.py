@@ -1,0 +1,106 @@
+"""Small dense linear algebra and the Savitzky-Golay filter, with the same bits on any x86-64 machine.
+
+numpy's ``linalg`` and ``@``, and scipy's ``savgol_filter`` (its coefficients come from a least-squares
+solve), call OpenBLAS, which picks its kernels by CPU: a 4x4 solve or a filter's coefficients differ in
+their last bits between an AVX2 kernel and an SSE3 one (``OPENBLAS_CORETYPE=Prescott``). The fit's start
+(smoothed states, the logs' own estimate), its restarts' states and its uncertainties use these instead:
+every product is an elementwise ufunc (IEEE, no fused multiply-add) and every sum runs in an order the
+code fixes. Meant for the few-column systems the fit solves, not for speed.
+
+Examples
+--------
+>>> A = np.array([[4.0, 1.0], [1.0, 3.0]])
+>>> solve(A, np.array([1.0, 2.0])).round(6).tolist()
+[0.090909, 0.636364]
+>>> lstsq(np.array([[1.0, 0.0], [1.0, 1.0], [1.0, 2.0]]), np.array([1.0, 3.0, 5.0])).round(12).tolist()
+[1.0, 2.0]
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def dot(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A @ x`` (``A`` 2-D, ``x`` 1-D or 2-D), its sums taken term by term in order."""
+    A, x = np.asarray(A, dtype=float), np.asarray(x, dtype=float)
+    terms = A[:, :, None] * (x[None, :, None] if x.ndim == 1 else x[None])
+    out = np.zeros(terms.shape[::2])
+    for j in range(A.shape[1]):  # one column at a time: the same order on any machine
+        out += terms[:, j]
+    return out[:, 0] if x.ndim == 1 else out
+
+
+def _back_substitute(R: np.ndarray, y: np.ndarray) -> np.ndarray:
+    n = R.shape[1]
+    x = np.zeros((n, *y.shape[1:]))
+    for k in range(n - 1, -1, -1):
+        rest = dot(R[k : k + 1, k + 1 : n], x[k + 1 :])[0] if k + 1 < n else 0.0
+        x[k] = (y[k] - rest) / R[k, k] if R[k, k] != 0 else 0.0  # a column with no effect stays 0
+    return x
+
+
+def solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``x`` with ``A x = b`` (Gaussian elimination with partial pivoting; ``b`` 1-D or 2-D)."""
+    M, y = np.array(A, dtype=float), np.array(b, dtype=float)
+    n = M.shape[0]
+    for k in range(n):
+        p = k + int(np.argmax(np.abs(M[k:, k])))
+        if M[p, k] == 0:
+            raise np.linalg.LinAlgError("singular matrix")
+        M[[k, p]], y[[k, p]] = M[[p, k]], y[[p, k]]
+        factors = M[k + 1 :, k] / M[k, k]
+        M[k + 1 :, k:] -= factors[:, None] * M[k, k:][None, :]
+        y[k + 1 :] -= factors.reshape(-1, *([1] * (y.ndim - 1))) * y[k]
+    return _back_substitute(M, y)
+
+
+def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least-squares ``x`` minimizing ``|A x - b|`` (Householder QR); a column of zeros gets 0."""
+    A, b = np.asarray(A, dtype=float), np.asarray(b, dtype=float)
+    norms = np.sqrt(np.sum(A * A, axis=0))
+    used = np.flatnonzero(norms > 1e-13 * max(float(np.max(norms)), 1e-300))
+    R, y = A[:, used].copy(), b.copy()
+    m, n = R.shape
+    for k in range(min(n, m)):
+        v = R[k:, k].copy()
+        norm = math.sqrt(float(np.sum(v * v)))
+        if norm == 0.0:
+            continue
+        v[0] += math.copysign(norm, v[0])
+        vv = float(np.sum(v * v))
+        column = v[:, None]
+        R[k:, k:] -= column * (2.0 * np.sum(column * R[k:, k:], axis=0) / vv)[None, :]
+        u = column if y.ndim == 2 else v
+        y[k:] -= u * (2.0 * np.sum(u * y[k:], axis=0) / vv)
+    x = np.zeros((A.shape[1], *b.shape[1:]))
+    x[used] = _back_substitute(R[:n], y[:n])
+    return x
+
+
+def savgol(y: np.ndarray, window: int, order: int = 3, deriv: int = 0, delta: float = 1.0) -> np.ndarray:
+    """Savitzky-Golay filter (``window`` odd), as ``scipy.signal.savgol_filter(..., mode="interp")``: the polynomial
+    fitted to each window, its ``deriv``-th derivative at the window's centre; the first and last half windows
+    from the polynomial of the first and last window."""
+    y = np.asarray(y, dtype=float)
+    half = window // 2
+    k = np.arange(window) - half
+    s = k / max(half, 1)  # scaled positions: a well-conditioned fit
+    V = s[:, None] ** np.arange(order + 1)[None, :]
+    gram = np.sum(V[:, :, None] * V[:, None, :], axis=0)
+    G = solve(gram, V.T)  # (order + 1, window): coefficients of the polynomial from the window's samples
+    powers = np.arange(order + 1)
+    falling = np.array([math.perm(j, deriv) for j in powers], dtype=float)
+    E = falling[None, :] * np.where(powers[None, :] >= deriv, s[:, None] ** np.maximum(powers - deriv, 0)[None, :], 0.0)
+    C = dot(E, G) / (max(half, 1) * delta) ** deriv  # row p: the derivative at window position p
+    n = len(y)
+    out = np.zeros(n)
+    centre = C[half]
+    for j in range(window):  # interior: the centre row slid along the samples, one term at a time
+        out[half : n - half] += centre[j] * y[j : n - window + 1 + j]
+    out[:half] = dot(C[:half], y[:window])
+    out[n - half :] = dot(C[half + 1 :], y[n - window :])
+    return out
+

@@ -1,0 +1,64 @@
+"""pendulab.exact: the fit's small linear algebra and smoothing, checked against numpy and scipy, and the same
+bits whichever kernels OpenBLAS picks for the CPU (numpy's own solve differs there in its last bits)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.signal import savgol_filter
+
+from pendulab import exact
+
+
+@pytest.mark.parametrize("window", [5, 31, 101])
+@pytest.mark.parametrize("deriv", [0, 1, 2])
+def test_savgol_equals_scipys_interp_mode(window, deriv):
+    y = np.cumsum(np.random.default_rng(1).normal(size=400))
+    want = savgol_filter(y, window, 3, deriv=deriv, delta=1e-3)
+    got = exact.savgol(y, window, 3, deriv=deriv, delta=1e-3)
+    assert np.max(np.abs(got - want)) <= 1e-11 * np.max(np.abs(want))  # measured: 2e-13 at most
+
+
+def test_solve_lstsq_and_dot_equal_numpys():
+    rng = np.random.default_rng(2)
+    A, b, B = rng.normal(size=(200, 3)), rng.normal(size=200), rng.normal(size=(200, 2))
+    assert np.allclose(exact.lstsq(A, b), np.linalg.lstsq(A, b, rcond=None)[0], rtol=1e-12, atol=1e-14)
+    assert np.allclose(exact.lstsq(A, B), np.linalg.lstsq(A, B, rcond=None)[0], rtol=1e-12, atol=1e-14)
+    M, g = rng.normal(size=(4, 4)), rng.normal(size=4)
+    assert np.allclose(exact.solve(M, g), np.linalg.solve(M, g), rtol=1e-12, atol=1e-14)
+    assert np.allclose(exact.dot(M, B[:4]), M @ B[:4], rtol=1e-14, atol=1e-14)
+    # A column that adds nothing gets 0 (numpy's minimum-norm answer too), the others their least squares.
+    A[:, 1] = 0.0
+    assert np.allclose(exact.lstsq(A, b), np.linalg.lstsq(A, b, rcond=None)[0], rtol=1e-12, atol=1e-14)
+    with pytest.raises(np.linalg.LinAlgError):
+        exact.solve(np.zeros((2, 2)), np.ones(2))
+
+
+_BITS = """
+import hashlib, numpy as np
+from pendulab import exact
+from pendulab.calibration._start import log_start
+from pendulab.calibration.fit import _initial_states
+from pendulab.calibration.synthetic import RIGS, synthetic_log
+from pendulab.model.parameters import PlantParameters
+rng = np.random.default_rng(0)
+A = rng.normal(size=(60, 4, 4)); A = np.einsum('kij,klj->kil', A, A) + np.eye(4); g = rng.normal(size=(60, 4))
+log = synthetic_log("triangle", RIGS["unseen"], duration=3.0)
+start = log_start([log], PlantParameters.preset("none"))
+parts = [np.array([exact.solve(a, b) for a, b in zip(A, g)]), exact.lstsq(A.reshape(-1, 4), g.ravel()[:240]),
+         _initial_states(log, False), np.array([start.F1, start.Beq, start.force_gain])]
+print(" ".join(hashlib.sha256(np.ascontiguousarray(p).tobytes()).hexdigest()[:12] for p in parts))
+"""
+
+
+def test_the_same_bits_on_any_blas_kernel():
+    """OpenBLAS's generic SSE3 kernels (Prescott) against those it picks for this CPU: the fit's start is the same."""
+    def bits(core: str | None) -> str:
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"} | ({"OPENBLAS_CORETYPE": core} if core else {})
+        return subprocess.run([sys.executable, "-c", _BITS], env=env, capture_output=True, text=True, check=True).stdout.strip()
+
+    assert bits(None) == bits("Prescott")
