@@ -103,4 +103,3 @@ def savgol(y: np.ndarray, window: int, order: int = 3, deriv: int = 0, delta: fl
     out[:half] = dot(C[:half], y[:window])
     out[n - half :] = dot(C[half + 1 :], y[n - window :])
     return out
-

@@ -27,10 +27,10 @@ from typing import Sequence
 
 import numpy as np
 
-from pendulab.exact import dot, lstsq, savgol
 from pendulab.calibration.extract import motor_constants
 from pendulab.calibration.logs import RampLog
 from pendulab.errors import ParameterError
+from pendulab.exact import dot, lstsq, savgol
 from pendulab.model.parameters import PlantParameters
 
 #: Smoothing window for speed and acceleration (s).
