@@ -1,5 +1,5 @@
 """pendulab.exact: the fit's small linear algebra and smoothing, checked against numpy and scipy, and the same
-bits whichever kernels OpenBLAS picks for the CPU (numpy's own solve differs there in its last bits)."""
+bits whichever kernels OpenBLAS picks for the CPU (numpy's least squares and scipy's filter differ there in their last bits)."""
 
 from __future__ import annotations
 

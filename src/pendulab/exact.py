@@ -1,8 +1,9 @@
 """Small dense linear algebra and the Savitzky-Golay filter, with the same bits on any x86-64 machine.
 
 numpy's ``linalg`` and ``@``, and scipy's ``savgol_filter`` (its coefficients come from a least-squares
-solve), call OpenBLAS, which picks its kernels by CPU: a 4x4 solve or a filter's coefficients differ in
-their last bits between an AVX2 kernel and an SSE3 one (``OPENBLAS_CORETYPE=Prescott``). The fit's start
+solve), call OpenBLAS, which picks its kernels by CPU: a least-squares solve, a matrix product and a filter's
+coefficients differ in their last bits between its AVX2 kernels and its SSE3 ones (``OPENBLAS_CORETYPE=Prescott``).
+A 4x4 ``numpy.linalg.solve`` gave the same bits under both, but LAPACK calls BLAS too, so it goes through here. The fit's start
 (smoothed states, the logs' own estimate), its restarts' states and its uncertainties use these instead:
 every product is an elementwise ufunc (IEEE, no fused multiply-add) and every sum runs in an order the
 code fixes. Meant for the few-column systems the fit solves, not for speed.
