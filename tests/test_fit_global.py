@@ -1,42 +1,62 @@
-"""The fit's global search (issue 19): where the local stages stop in a wrong basin, CMA-ES on the replay from the start.
+"""The fit's escapes from a wrong basin (issue 19) on the unseen rig's triangle wave (3 V, 0.4 Hz).
 
-On the unseen rig's triangle wave (3 V, 0.4 Hz) the cart stays in the slip region, leaving it only by force near the
-peaks. From every start the observer search and the polish folded the slip drag ``B`` into ``Beq`` (``B`` -99.9 %,
-``Beq`` +900 %) and replayed the log 4.5 encoder steps off, against the rig's own values' 1.27. The global search,
-seeded, from the start with a step of a factor e, finds the rig's basin: its first seed without voltage noise, its
-fourth with 10 mV (1 of 8 seeds tried there found it).
+The cart stays in the slip region there, leaving it only by force near the peaks. From every start the observer
+search and the polish folded the slip drag ``B`` into ``Beq`` (``B`` -99.9 %, ``Beq`` +900 %, ``F2 = F1``) and replayed
+the log 4.5 encoder steps off, against the rig's own values' 1.27. Only the global search's luckier seeds found the
+rig's basin (1 of 8 with 10 mV on the voltage). The scan of the drag's split now also tries the slip region with ``F2``
+out of the way (``_polish.SLIP_F2_FACTORS``): the drive left the slip region at ``F2`` right after each breakaway, so no
+share of ``B`` could lower the cost. And where the cart stays in the slip region, the common scale of the gain, forces
+and drags is searched (``fit._in_the_slip_region_only``): the polish stopped with the force gain 5-7 % low.
 """
 
 from __future__ import annotations
 
 import pytest
 
+from pendulab.calibration import _polish
 from pendulab.calibration.fit import GLOBAL_ABOVE_STEPS, fit_parameters
 from pendulab.calibration.synthetic import corpus, held_out
 from pendulab.model.parameters import PlantParameters
 
 
-@pytest.mark.parametrize("noise", ["0 mV", "10 mV"])
-def test_the_global_search_finds_the_rigs_basin_where_the_local_stages_fold_B_into_Beq(noise):
+def _case(noise: str):
     cases = corpus()
     case = next(c for c in cases if c.name == f"triangle | unseen | {noise}")
     assert case.name not in held_out(cases)
+    return case
+
+
+@pytest.mark.parametrize("noise", ["0 mV", "10 mV"])
+def test_the_split_scan_leaves_the_basin_where_the_local_stages_fold_B_into_Beq(noise):
+    case = _case(noise)
     said: list[str] = []
     result = fit_parameters([case.log()], PlantParameters.preset("none"), on_progress=said.append)
-    before = [s for s in said if s.startswith("polished on the replay")]
-    assert before and any(s.startswith("the global search, and the polish") for s in said), said
+    assert any(s.startswith("scans along scale, split") for s in said), said
+    assert not any(s.startswith("the global search") for s in said), said  # no seed's luck
+    assert any(s.startswith("the cart stays in the slip region") for s in said), said
     true = case.params
     steps = result.forward_rms / result.encoder_step
-    # Measured: 0.72 steps; Beq -2.0 %, force gain -0.1 %, F1 -0.3 %, B +0.05 % (10 mV: 0.79; +1.8, -1.2, -2.3, -1.5 %).
+    # Measured: 0.69 steps; force gain -1.2 %, F1 -1.2 %, B -0.5 %, Beq -8.3 % (10 mV: 0.77 steps; +0.7, +0.3, +1.2, -3.7 %).
+    # Beq and B are only bounded here: the cart stays in the slip region, where the replay sees mostly their sum.
     assert result.forward_ok and steps <= GLOBAL_ABOVE_STEPS, steps
-    for name in ("Beq", "force_gain"):
-        assert abs(result.values[name] / getattr(true, name) - 1) < 0.05, (name, result.values[name])
-    for name in ("F1", "B"):
-        assert abs(result.values[name] / getattr(true, name) - 1) < 0.10, (name, result.values[name])
+    assert abs(result.values["force_gain"] / true.force_gain - 1) < 0.05, result.values["force_gain"]
+    for name in ("F1", "B", "Beq"):
+        assert abs(result.values[name] / getattr(true, name) - 1) < 0.15, (name, result.values[name])
     # Every range it reports holds the rig's value.
     for name, (low, high) in result.allowed.items():
         assert result.determination[name] == "determined" or low <= getattr(true, name) <= high, (name, low, high)
-    # What it calls not identified kept its start value, as the calibration file says (v2, flat around the answer
-    # at 0.48 m/s, replayed worse back at its start, 0.05: it is reported bounded instead).
     for name, status in result.determination.items():
         assert status != "not identified" or result.values[name] == result.initial[name], (name, result.values[name])
+
+
+def test_without_f2_out_of_the_way_the_fit_stays_in_the_trap(monkeypatch):
+    """The same fit with the split scanned at ``F2`` as it is, and no global search: trapped (the escape is what works)."""
+    import pendulab.calibration.fit as fit_module
+
+    monkeypatch.setattr(_polish, "SLIP_F2_FACTORS", (None,))
+    monkeypatch.setattr(fit_module, "GLOBAL_SEEDS", ())
+    case = _case("0 mV")
+    result = fit_parameters([case.log()], PlantParameters.preset("none"))
+    # Measured: 4.5 steps, B folded into Beq.
+    assert result.forward_rms / result.encoder_step > 3.0
+    assert result.values["B"] < 0.2 * case.params.B and result.values["Beq"] > 5 * case.params.Beq, result.values
