@@ -49,6 +49,25 @@ def test_scans_leave_the_basin_where_B_is_folded_into_Beq():
     assert value["v2"] > 0.03  # the slip region is back (true 0.06)
 
 
+#: Where the fit settled on the 16 s triangle wave of the corpus (10 mV): B folded into Beq, F2 at F1.
+TRIANGLE_TRAP = {"F1": 2.1187, "v1": 0.0014, "F2": 2.1205, "v2": 0.05, "B": 0.1156, "Beq": 60.80, "force_gain": 0.7545}
+
+
+def test_the_split_scan_moves_F2_out_of_the_way_where_the_drive_leaves_the_slip_region_at_once(monkeypatch):
+    """A triangle wave (8 s): from the trap, where F2 = F1 lets the drive leave the slip region right after each
+    breakaway, no share of B in the drag lowers the cost with v2 alone; with F2 raised to twice F1 it does."""
+    anchors, space = prepared(synthetic_log("triangle", TRUE, duration=8.0, voltage_noise=0.0), TRUE.q_x)
+    trap = np.array([TRIANGLE_TRAP[n] for n in DEFAULT_FIT]) / space.scales
+    assert steps(anchors, space, trap) > 3.2  # measured 4.27 (the truth: 1.57)
+    monkeypatch.setattr(_polish, "SLIP_F2_FACTORS", (None,))
+    assert steps(anchors, space, _polish.scan_directions(anchors, space, trap, rounds=1).theta) > 3.2  # measured 4.27
+    monkeypatch.undo()
+    found = _polish.scan_directions(anchors, space, trap, rounds=1)
+    value = dict(zip(DEFAULT_FIT, found.theta * space.scales))
+    assert steps(anchors, space, found.theta) < 1.5  # measured 1.17
+    assert value["B"] / (value["B"] + value["Beq"]) > 0.7 and value["F2"] > 1.5 * value["F1"] and value["v2"] > 0.03, value  # 0.97, 1.76, 0.06
+
+
 def test_scans_fill_the_compiled_batches_and_find_a_minimum_off_the_start():
     # The compiled replays and observers run 1, 16 or 32 parameter sets at a time (others are padded): a
     # scan runs only its moved points (the current one's cost is known), so every batch is a multiple of 16.
