@@ -60,3 +60,20 @@ def test_a_log_beyond_the_slip_region_keeps_what_the_profile_says(shape, rig):
     sigma = np.full(len(NAMES), 0.01)
     allowed: dict[str, tuple[float, float]] = {}
     assert split_of_the_drag(NAMES, status, sigma, allowed, RIGS[rig], [(inside, beyond)]) == (status, sigma, {}, "")
+
+
+
+@pytest.mark.parametrize(("shape", "slow"), [("ramps with holds", True), ("triangle", True), ("random steps", False)])
+def test_a_replay_in_the_slip_region_sees_the_split_only_where_the_cart_creeps_to_a_stop(shape, slow):
+    # SPEC §2: inside the slip region the drag is B + Beq, beyond it Beq alone, and while the cart sticks (slower than v1)
+    # Beq alone still acts on its creep. On the unseen rig's slow logs (the fit's misses of Beq: 11-12 %, reported bounded)
+    # moving 30 % of Beq into B, or 10 % of B into Beq, moves an 8 s replay by 0.11-0.17 mm at most, and by 5-15 um with
+    # v1 at 0.1 mm/s (no creep); random steps on the same rig, which leave the slip region, by 39-77 mm.
+    p = RIGS["unseen"]
+    log = synthetic_log(shape, p, duration=8.0, voltage_noise=0.0)
+    x0 = np.array([log.x[0], 0.0, 0.0, 0.0])
+    for rig, low, high in ((p, 2 * p.q_x, 0.5e-3), (p.with_values(v1=1e-4), 0.0, p.q_x)):
+        split = [rig, rig.with_values(B=rig.B + 0.3 * rig.Beq, Beq=0.7 * rig.Beq), rig.with_values(B=0.9 * rig.B, Beq=rig.Beq + 0.1 * rig.B)]
+        states = replay(split, log.V, log.t, x0)
+        moved = float(np.max(np.abs(states[1:, :, 0] - states[0, :, 0])))
+        assert (low < moved < high) if slow else (moved > 0.01), (rig.v1, moved)

@@ -79,7 +79,8 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
     return space.with_prior(np.nan_to_num(np.concatenate(rows, axis=1), nan=1e6, posinf=1e6, neginf=-1e6), np.atleast_2d(thetas))
 
 
-def _levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, omega: float, max_iter: int) -> Observed:
+def levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, omega: float, max_iter: int) -> Observed:
+    """At most ``max_iter`` iterations from ``theta`` on the prediction errors at bandwidth ``omega``, in log coordinates."""
     lower = np.log(np.maximum(space.lower, FLOOR))
     upper = np.log(np.maximum(space.upper, 2 * FLOOR))
 
@@ -118,23 +119,13 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
     >>> # skipped: compiles the observer (tests/test_fit_observer.py runs it)
     >>> answer = search([anchors], space, [theta0])       # doctest: +SKIP
     """
-    tried = [_levenberg_marquardt(logs, space, s, OMEGAS[0], START_ITERATIONS) for s in starts]
+    tried = [levenberg_marquardt(logs, space, s, OMEGAS[0], START_ITERATIONS) for s in starts]
     best = min(tried, key=lambda o: o.cost)
     runs, iterations = sum(o.runs for o in tried), sum(o.iterations for o in tried)
     # Robust scans (scan_directions) where slow logs hide other basins: B folded into Beq is only 0.6 % worse at
     # the widest bandwidth on a slow triangle wave, 8 % at the narrower one.
     omega = OMEGAS[-1]
-    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: costs(logs, space, thetas, omega))
-    best = _levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
+    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: (lambda R: np.einsum("ij,ij->i", R, R))(prediction_errors(logs, space, thetas, omega)))
+    best = levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
     return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs)
 
-
-def refined(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int) -> Observed:
-    """The search's last stage alone, at most ``max_iter`` iterations from ``theta`` (at the narrower bandwidth)."""
-    return _levenberg_marquardt(logs, space, theta, OMEGAS[-1], max_iter)
-
-
-def costs(logs: list[Anchors], space: Space, thetas: np.ndarray, omega: float) -> np.ndarray:
-    """The observer's cost (sum of squared weighted prediction errors and prior) of each row of ``thetas``."""
-    R = prediction_errors(logs, space, thetas, omega)
-    return np.einsum("ij,ij->i", R, R)

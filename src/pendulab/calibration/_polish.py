@@ -47,9 +47,8 @@ class Anchors:
         return len(self.V)
 
     def crop(self, start: int, stop: int, x0: np.ndarray | None = None) -> "Anchors":
-        """Steps ``start`` to ``stop``, from ``x0`` (default: the known state there, at 0 or a restart)."""
-        if x0 is None:
-            x0 = self.x0 if start == 0 else self.restarts[start]
+        """Steps ``start`` to ``stop``, from ``x0`` (default: the first state; give it where ``start > 0``)."""
+        x0 = self.x0 if x0 is None else x0
         restarts = {k - start: s for k, s in self.restarts.items() if start < k < stop}
         segments = self.segments[(self.segments >= start) & (self.segments < stop)] - start
         return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments, self.denoised)
@@ -341,10 +340,6 @@ class Space:
         return Space(self.params0.with_values(**{name: float(value * self.scales[j])}), tuple(self.names[i] for i in keep), self.scales[keep],
                      self.lower[keep], self.upper[keep], None if self.prior is None else (self.prior[0][keep], self.prior[1]))
 
-    def residuals(self, logs: list[Anchors], thetas: np.ndarray) -> np.ndarray:
-        """Weighted replay errors and the prior's residuals, ``(m, n_residuals)``."""
-        return self.with_prior(replay_errors(logs, self.vectors(thetas), self.names), thetas)
-
     def with_prior(self, r: np.ndarray, thetas: np.ndarray) -> np.ndarray:
         """Errors ``r`` ``(m, n_errors)`` of ``thetas`` ``(m, n)`` and the prior's residuals beside them."""
         if self.prior is None:
@@ -363,7 +358,8 @@ def costs(logs: list[Anchors], space: Space, thetas: np.ndarray) -> np.ndarray:
     memo, keys = space.memo(logs), [row.tobytes() for row in thetas]
     new = list(dict.fromkeys(k for k in keys if k not in memo))
     if new:
-        R = np.nan_to_num(space.residuals(logs, np.array([np.frombuffer(k) for k in new])), nan=1e6)
+        X = np.array([np.frombuffer(k) for k in new])
+        R = space.with_prior(np.nan_to_num(replay_errors(logs, space.vectors(X), space.names), nan=1e6), X)
         memo.update(zip(new, np.einsum("ij,ij->i", R, R)))
     return np.array([memo[k] for k in keys])
 

@@ -8,46 +8,40 @@ Method
 *Model.* The equations are :func:`pendulab.model.plant.plant_equations` under the true (switching)
 stick-slip law, compiled to C (:mod:`pendulab.calibration._replay`), several parameter sets at once.
 
-Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a
-check replays the whole logs with it.
+Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a check replays the
+whole logs with it. Every decision between answers compares their replay errors (:func:`pendulab.calibration._polish.replay_errors`:
+their cost on what was searched, their RMS on the whole logs).
 
-*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the
-one-sample prediction errors of an observer of the replay (the replay itself is a needle as an
-objective), from the start and (the cart alone) the logs' own estimate; the polish goes on from its
-answer. Long logs are
-searched on at most :data:`STAGE_SECONDS` of them (:data:`PIECE_SECONDS` windows where the cart stops
-and starts most). An upright pendulum's replay restarts from the observer's state estimates, each
-settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`).
+*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the one-sample
+prediction errors of an observer of the replay (the replay itself is a needle as an objective), from the start
+(:func:`ramp_start`, the one rule for the Python API and ``pendulab fit``) and, the cart alone, the logs' own estimate
+(:mod:`pendulab.calibration._start`). Long logs are searched on at most :data:`STAGE_SECONDS` of them
+(:data:`PIECE_SECONDS` windows where the cart stops and starts most). An upright pendulum's replay restarts from the
+observer's state estimates, each settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`).
+``regularization`` adds a weak prior, ``(p/p0 - 1)^2 / 2`` per parameter: what the logs cannot show keeps its start.
 
-*A weak prior.* ``regularization`` adds ``(p/p0 - 1)^2 / 2`` per parameter (a standard deviation of
-100 % of the start in units of the measurement noise): what the logs cannot show keeps its start.
+*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which decides whether
+a push breaks the cart away at all, in this order, each only where the answer still misses (:func:`_polished` and after):
+scans of the thresholds and a pattern search; robust 1-D scans along what slow logs confuse (the common scale of the
+gain, the forces and the drags; the split of the drag between ``B`` and ``Beq``, also with the slip region widened);
+walks along the slip region's corner ``F2, v2``; CMA-ES around the answer (:data:`EVOLVE_ABOVE_STEPS`); the thresholds
+rescanned from the logs' own estimate (:func:`_rescanned`); the global search, CMA-ES on the replay from the start, a
+factor e either way (:data:`GLOBAL_ABOVE_STEPS`); where the cart stays in the slip region, a search along the common
+scale (:func:`_in_the_slip_region_only`); a voltage logged a sample early or late (:data:`LAG_ABOVE_STEPS`). A noisy
+logged voltage is replayed denoised (the uncertainties hold how the answer moves with the other estimate, :func:`_voltage_shift`).
 
-*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which
-decides whether a push breaks the cart away at all: scans of the thresholds and a pattern search,
-robust 1-D scans along what slow logs confuse (the common scale of the gain, the forces and the drags;
-the split of the drag between ``B`` and ``Beq``, also with the slip region widened), walks along the slip region's corner ``F2, v2``; where the
-answer still misses by more than :data:`EVOLVE_ABOVE_STEPS` encoder steps an evolution strategy around it
-(CMA-ES), and where it then misses by more than :data:`GLOBAL_ABOVE_STEPS` (the cart alone) the global search:
-CMA-ES on the replay from the start, a factor e either way (:func:`_evolved`); where the cart stays in the slip
-region, a search along the common scale (:func:`_in_the_slip_region_only`). A noisy logged voltage is replayed
-denoised (and the uncertainties hold how the answer moves with the other
-estimate, :func:`_voltage_shift`).
+*Check.* The whole logs are replayed with the answer, restarted only where the log gives the state (each rest of the
+cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state estimate); the RMS and largest
+position error are reported and stored in the calibration file. A few stretches whose replay diverges (a breakaway that
+a hair of drive decides) are named and left out (:data:`DIVERGED_SHARE`). ``pendulab fit`` refuses (exit status 3) an
+answer whose replay misses by more than :attr:`FitResult.forward_limit`.
 
-*Check.* The whole logs are replayed with the answer, restarted only where the log gives the state
-(each rest of the cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state
-estimate); the RMS and largest position error are reported and stored in the calibration file. A few
-stretches whose replay diverges (a breakaway that a hair of drive decides) are named and left out (:data:`DIVERGED_SHARE`).
-``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than
-:attr:`FitResult.forward_limit`.
-
-*What the logs determine* (:func:`pendulab.calibration._polish.profile`): along each parameter (and
-the common scale and the drag split), a replay cost that rises by one effective chi-square unit both
-ways makes it *determined* (that half-width its standard uncertainty, at least 0.3 %), one way only *bounded*, flat
-*not identified* (it keeps its start value); ``v1`` is at most bounded (:data:`V1_SCATTER`). The
-calibration file says which (``metadata.determination``); a log that determines nothing is refused.
-
-*The start* (:func:`ramp_start`, the one rule for the Python API and ``pendulab fit``): the friction
-from the ramp-test extraction where the logs are ramp tests, else ``params0``.
+*What the logs determine* (:func:`pendulab.calibration._polish.profile`): along each parameter (and the common scale
+and the drag split), a replay cost that rises by one effective chi-square unit both ways makes it *determined* (that
+half-width its standard uncertainty, at least 0.3 %), one way only *bounded*, flat *not identified* (it keeps its start
+value); ``v1`` is at most bounded (:data:`V1_SCATTER`); a log whose replay stays in the slip region shows ``B + Beq``,
+not its split (:func:`split_of_the_drag`). The calibration file says which (``metadata.determination``); a log that
+determines nothing is refused.
 
 Examples
 --------
@@ -716,25 +710,17 @@ def _rescanned(setup: _Setup, answer: _Answer) -> _Answer:
     return found
 
 
-def _in_the_slip_region(setup: _Setup, answer: _Answer) -> bool:
-    """Whether the answer's replay of the whole logs moves the cart beyond the slip region in fewer than
-    :data:`MIN_BEYOND_SHARE` of its moving samples (:func:`slip_shares`)."""
-    params = setup.space.params0.with_values(**dict(zip(setup.names, answer.polished.theta * setup.scales)))
-    vector = np.asarray(params.as_vector(), dtype=float)[None, :]
-    inside = beyond = 0
-    for a in answer.replays:
-        states = _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=setup.names)[0]
-        counts = slip_shares(params, a.V, states)
-        inside, beyond = inside + counts[0], beyond + counts[1]
-    return slip_only(inside, beyond)
-
-
 def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
-    """Stage 2, last: where the cart stays in the slip region (:func:`_in_the_slip_region`), the answer searched along its
-    common scale (:data:`SCALE_STEP`): from the scale moved either way (:func:`_at_scale`), then on in the direction that
-    lowered the cost, up to :data:`SCALE_STEPS` times. Taken if the whole logs replay better."""
+    """Stage 2, last: where the answer's replay of the whole logs stays in the slip region (:func:`slip_only`), the answer
+    searched along its common scale (:data:`SCALE_STEP`): from the scale moved either way (:func:`_at_scale`), then on in
+    the direction that lowered the cost, up to :data:`SCALE_STEPS` times. Taken if the whole logs replay better."""
     searched, result, names = answer.searched, answer.polished, setup.names
-    if "scale" not in _polish.directions_of(names) or not _in_the_slip_region(setup, answer):
+    if "scale" not in _polish.directions_of(names):
+        return answer
+    params = setup.params0.with_values(**dict(zip(names, result.theta * setup.scales)))
+    vector = np.asarray(params.as_vector(), dtype=float)[None, :]
+    regimes = [slip_shares(params, a.V, _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]) for a in answer.replays]
+    if not slip_only(*(sum(r[k] for r in regimes) for k in (0, 1))):
         return answer
     for sign in (1.0, -1.0):
         for _ in range(SCALE_STEPS):
@@ -774,7 +760,7 @@ def _voltage_lag(setup: _Setup, answer: _Answer, shifts: Sequence[int]) -> int:
 
     def probed(shift: int) -> float:
         shifted = [replace(a, V=shifted_voltage(a.V, shift)) for a in answer.searched]
-        return _observer.refined(shifted, setup.space, answer.candidate.theta, LAG_PROBE_ITER).cost
+        return _observer.levenberg_marquardt(shifted, setup.space, answer.candidate.theta, _observer.OMEGAS[-1], LAG_PROBE_ITER).cost
 
     unshifted = probed(0)
     costs = {shift: probed(shift) for shift in shifts}
