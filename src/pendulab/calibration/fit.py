@@ -684,11 +684,10 @@ def _evolved(setup: _Setup, answer: _Answer, globally: bool = False, quiet: bool
 
 
 def _rescanned(setup: _Setup, answer: _Answer) -> _Answer:
-    """Stage 2, before the global search: where the answer misses (:data:`GLOBAL_ABOVE_STEPS`), the thresholds scanned finely
-    from the logs' own estimate with ``F2`` out of the way (:data:`RESCAN`), then evolved and polished (:func:`_evolved`);
-    taken if it replays better. Not with the pendulum, which has no estimate: from its answer instead, the sticky rig's
-    closed loop with 10 mV on the logged voltage went from 3.35 to 1.81 steps, with v2 -18 % and B +27 % called
-    determined at more than 3 sigmas (its noisy voltage's replay prefers them, also with restarts settled at either)."""
+    """Stage 2, before the global search: where the answer misses (:data:`GLOBAL_ABOVE_STEPS`), :data:`RESCAN`, then evolved
+    and polished (:func:`_evolved`); taken if it replays better. Not with the pendulum, which has no estimate: from its answer
+    instead, the sticky rig's closed loop with 10 mV on the logged voltage went from 3.35 to 1.81 steps, with v2 -18 % and B +27 %
+    called determined at more than 3 sigmas (its noisy voltage's replay prefers them, also with restarts settled at either)."""
     estimate, space, searched = answer.candidate.estimate, setup.space, answer.searched
     if estimate is None or answer.rms <= GLOBAL_ABOVE_STEPS * setup.step or not {"F2", "v2"} <= set(setup.names):
         return answer
@@ -1145,13 +1144,11 @@ def split_of_the_drag(names: Sequence[str], status: Sequence[str], sigma: np.nda
         params: PlantParameters, regimes: Sequence[tuple[int, int]]) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What a log that never leaves the slip region cannot determine, whatever the profile around the answer says.
 
-    Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE`
-    of its moving samples beyond it (with both ``B`` and ``Beq`` fitted) shows only that sum, so both are reported
-    bounded between 0 and the sum (in the returned ``allowed``; with no upper bound where the force gain is fitted,
-    since the sum is seen against the drive); it sees the common scale of the drive, the forces
-    and that drag, and ``v1``, only through the cart's inertia over the slip region's ~10 ms time constant, and
-    ``v2`` and ``F2`` only from below: every name of :data:`SLIP_ONLY_UNDETERMINED` is reported bounded (``F1``, ``v1``
-    and the force gain with no range, ``F2`` and ``v2`` from below), and a note says why and what to record. Else unchanged.
+    Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE` of its
+    moving samples beyond it (with both ``B`` and ``Beq`` fitted) shows that sum (its split only in the creep below ``v1``,
+    where ``Beq`` acts alone); the common scale of the drive, the forces and that drag, and ``v1``, only through the cart's
+    inertia; ``v2`` and ``F2`` only from below. Each of :data:`SLIP_ONLY_UNDETERMINED` is then reported bounded (ranges in
+    the branches below), and a note says why and what to record. Else unchanged.
 
     Returns
     -------
