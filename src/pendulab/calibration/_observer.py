@@ -125,7 +125,12 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
     # Robust scans (scan_directions) where slow logs hide other basins: B folded into Beq is only 0.6 % worse at
     # the widest bandwidth on a slow triangle wave, 8 % at the narrower one.
     omega = OMEGAS[-1]
-    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=lambda thetas: (lambda R: np.einsum("ij,ij->i", R, R))(prediction_errors(logs, space, thetas, omega)))
+
+    def observed_costs(thetas: np.ndarray) -> np.ndarray:  # the observer's cost of each row (squared errors and prior)
+        R = prediction_errors(logs, space, thetas, omega)
+        return np.einsum("ij,ij->i", R, R)
+
+    scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=observed_costs)
     best = levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
     return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs)
 
