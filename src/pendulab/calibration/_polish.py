@@ -112,11 +112,10 @@ RESTART_STEPS = np.array([1e-5, 1e-4, 1e-4, 1e-3])
 def settled(a: Anchors, vector: np.ndarray, free: tuple[str, ...] | None, iterations: int = 4) -> Anchors:
     """``a`` with its first state and each restart's chosen to replay its own stretch best at the parameters ``vector``.
 
-    An observer's state estimate is causal: its speeds lag, and an upright pendulum's replay, open-loop unstable, grows
-    what they miss (the unseen rig's closed loop: 1.4 encoder steps from the observer's estimates). Gauss-Newton on
-    each stretch's weighted errors, the Jacobian by central differences: each restart begins a stretch of its own, so
-    one replay moves one coordinate of every stretch's state at once (eight replays per iteration); a stretch keeps a
-    step only where it lowers that stretch's cost.
+    An observer's state estimate is causal: its speeds lag, and an upright pendulum's replay, open-loop unstable, grows what
+    they miss (the unseen rig's closed loop: 1.4 encoder steps). Gauss-Newton on each stretch's weighted errors, the Jacobian
+    by central differences (one replay moves one coordinate of every stretch's state at once: eight per iteration); a stretch
+    keeps a step only where it lowers its cost.
     """
     starts = np.array([0, *sorted(a.restarts)], dtype=int)
     bounds = np.r_[starts, a.n]
@@ -397,11 +396,9 @@ def directions_of(names: tuple[str, ...]) -> tuple[str, ...]:
     return (*out, *names)
 
 
-#: The slip region's end speeds (m/s) the drag split is scanned with (:func:`scan_directions`), each with ``F2`` as it is
-#: and raised to at least twice ``F1`` (:func:`slip_region`). On the unseen rig's triangle wave (10 mV), stopped at 4.5
-#: steps with ``B`` folded into ``Beq`` and ``F2 = F1``, the split with ``v2`` alone found nothing lower: the cart's
-#: drive leaves the slip region at ``F2`` right after the breakaway, so ``B`` never acts. With ``F2`` out of the way it
-#: found 1.84 steps (95 % of the drag in ``B``), polished to 0.98; before, only the global search's luckier seeds did.
+#: The slip region's end speeds (m/s) the drag split is scanned with (:func:`scan_directions`), each with ``F2`` as it is and raised to
+#: at least twice ``F1`` (:func:`slip_region`). The unseen rig's triangle wave (10 mV), stopped at 4.5 steps with ``B`` folded into ``Beq``
+#: and ``F2 = F1``, leaves the slip region at ``F2`` right after each breakaway, so ``B`` never acts: with ``F2`` out of the way, 0.98 steps.
 SLIP_SPEEDS = (0.01, 0.03, 0.06, 0.12)
 SLIP_F2_FACTORS = (None, 2.0)
 
@@ -469,17 +466,14 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
            scan: tuple[str, ...] = ("F1", "F2", "v2"), scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015), scan_rounds: int = 2) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
 
-    The replay's error is not smooth in the parameters: a breakaway that happens or not is a jump, so
-    derivatives (even finite differences) mislead. The parameters ``scan`` (the thresholds whose
-    jumps dominate) are first scanned one by one over ``scan_spans`` (relative, coarse then fine,
-    15 factors each, log-spaced within ``1 + span`` either way: a factor 3 first, for a
-    smoothed answer caught in a wrong basin; ``scan_rounds`` times, as they interact). Each iteration tries every
-    parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of
-    :data:`PAIRS` (parameters that trade off: the slip region's corner ``F2, v2``, the two forces, and ``Beq``
-    against the force gain, which both set a steady speed) and the last good move, all in one batched replay, and keeps the
-    best if it lowers the cost; otherwise the radius shrinks threefold, down to 0.1 %. The
-    order constraints ``F1 <= F2`` and ``v1 <= v2`` and the bounds are kept by projection. It stops
-    early once it has replayed ``work`` samples (parameter sets x samples; see fit.POLISH_WORK).
+    The replay's error is not smooth in the parameters (a breakaway that happens or not is a jump), so derivatives
+    mislead. The thresholds ``scan``, whose jumps dominate, are first scanned one by one, ``scan_rounds`` times, over
+    ``scan_spans`` (coarse then fine, 15 factors log-spaced within ``1 + span`` either way). Each iteration tries every
+    parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of :data:`PAIRS` (the
+    slip region's corner, the two forces, ``Beq`` against the gain: each pair sets one speed or force) and the last good
+    move, in one batched replay, and keeps the best if it lowers the cost; else the radius shrinks threefold, down to
+    0.1 %. Bounds and ``F1 <= F2``, ``v1 <= v2`` hold by projection. It stops once it has replayed ``work`` samples
+    (parameter sets x samples; see fit.POLISH_WORK).
     """
     names, project = space.names, space.project
     done = {"samples": 0.0, "replays": 0}
@@ -597,12 +591,11 @@ def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, se
     ``sigma``, for at most ``generations`` of :data:`EVOLVE_POPULATION`; ``give_up=(g, c)`` stops it after ``g``
     generations if it has found no cost below ``c`` by then.
 
-    Derivative-free and with a population per step, it steps over the replay cost's small jumps, and it
-    learns the joint moves that the pattern search's fixed directions miss (see fit.EVOLVE_ABOVE_STEPS); with a
-    step of a factor e, from the start, it is the fit's global search (see fit.GLOBAL_ABOVE_STEPS). Seeded, with
-    its samples rounded (1e-9 in log units) so that the linear algebra's last bits, which differ between
-    CPUs, do not change what is replayed; numpy's global random state is restored. Returns the best point
-    and its cost (``theta`` and ``cost`` if none is lower).
+    Derivative-free with a population per step, it steps over the replay cost's small jumps and learns the joint moves the
+    pattern search's fixed directions miss; with a step of a factor e, from the start, it is the fit's global search.
+    Seeded, its samples rounded (1e-9 in log units) so that the linear algebra's last bits, which differ between CPUs, do
+    not change what is replayed; numpy's global random state is restored. Returns the best point and its cost (``theta``
+    and ``cost`` if none is lower).
     """
     import cma
 
@@ -627,10 +620,9 @@ PROFILE_OFFSETS = (0.003, 0.01, 0.03, 0.1, 0.3, 0.7)
 DETERMINED, BOUNDED, NOT_IDENTIFIED = "determined", "bounded", "not identified"
 #: The friction law's thresholds: the replay cost is a staircase in each (see :func:`profile`).
 THRESHOLDS = ("F1", "v1", "F2", "v2")
-#: A parameter's range (:class:`Profile` ``allowed``) is where the replay cost stays below this many times the
-#: answer's: the true values of the development corpus's rigs replay their logs at up to 1.64 times the cost of the
-#: answer found (the squared ratio of the RMS; quantization and noise; ``bench/fit_corpus.py``; far more on a few logs
-#: whose noisy voltage the answer follows better), and within one chi-square unit of it ranges excluded them.
+#: A parameter's range (:class:`Profile` ``allowed``) is where the replay cost stays below this many times the answer's: the
+#: development corpus's true values replay at up to 1.64 times the answer's cost (quantization and noise), and ranges within
+#: one chi-square unit excluded them.
 RANGE_COST_RATIO = 2.0
 #: A parameter uncertain by more than this fraction of its value is only bounded (a range, ``allowed``): on a log
 #: of random steps of the unseen rig, F1 -15 % off came out "determined" to +-30 %.
@@ -688,30 +680,22 @@ def stretch_of(logs: list[Anchors]) -> np.ndarray:
 def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 3e-3) -> Profile:
     """The replay cost along each parameter (the others held), and along the joint directions, both ways.
 
-    Each parameter and each joint direction of :func:`directions_of` (the common scale of the gain, the
-    forces and the drags; the split of the drag between ``B`` and ``Beq``) is moved by
-    :data:`PROFILE_OFFSETS` (log units; four times those in logit units for the split) both ways. The
-    threshold is one effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error at the
-    answer, ``k`` its :func:`correlation_length`), at least the cost of one stretch between restarts. A
-    side where the cost crosses it bounds the move there (the crossing interpolated in the offset; for
-    the thresholds of :data:`THRESHOLDS`, whose cost is a staircase, the first offset seen above);
-    crossed both ways, the parameter is determined and its uncertainty is the larger half-width, at least
-    the linearized covariance of the determined parameters (central differences of relative ``step``, in
-    the same batched replay) and at least its change along a joint direction's half-width. A joint
-    direction that the cost does not bound both ways leaves none of its parameters determined: a slow
-    log that never shows the inertia cannot tell the force gain from a common scale of everything.
+    Each parameter and each joint direction of :func:`directions_of` (the common scale; the drag split) is moved by
+    :data:`PROFILE_OFFSETS` (log units; four times those in logit units for the split) both ways. The threshold is one
+    effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error at the answer, ``k`` its
+    :func:`correlation_length`), at least one stretch's cost. A side where the cost crosses it bounds the move there
+    (interpolated; for :data:`THRESHOLDS`, whose cost is a staircase, the first offset above). Crossed both ways, the
+    parameter is determined, uncertain by the larger half-width, at least the linearized covariance (central differences
+    of relative ``step``, in the same batched replay) and its change along a joint direction's half-width. A joint
+    direction not bounded both ways leaves none of its members determined: a slow log that never shows the inertia cannot
+    tell the force gain from a common scale of everything. ``F2`` and ``v2`` (:data:`PARTNERS`) count, from the first
+    offset above the threshold outwards, the move with the other's best value (:func:`valley`).
 
-    ``F2`` and ``v2`` (:data:`PARTNERS`) count, from the first offset where the move alone rises above the
-    threshold and outwards while it stays below, the move with the other's best value (:func:`valley`).
-    No uncertainty is below the finest offset (the cost is a staircase under it), nor a threshold's below the distance to
-    its range's farther end (its staircase's first step up says little of how far the cost stays low: at 100 Hz F1 5.6 %
-    off was called known to 0.3 %); uncertain by more than
-    :data:`MAX_RELATIVE_SIGMA` of its value, a parameter is only bounded.
-
-    The ranges (``allowed``) are wider than the status's threshold: where the cost stays below
-    :data:`RANGE_COST_RATIO` times the answer's, along the parameter and along each joint direction it is a
-    member of (to ``0`` or ``inf`` where the cost never rises that far). A parameter whose range is open on
-    a side is bounded, not determined.
+    No uncertainty is below the finest offset, nor a threshold's below the distance to its range's farther end (at 100 Hz
+    F1 5.6 % off was called known to 0.3 %). The ranges (``allowed``) are where the cost stays below :data:`RANGE_COST_RATIO`
+    times the answer's, along the parameter and each joint direction it is a member of (``0`` or ``inf`` where it never
+    rises that far). Uncertain by more than :data:`MAX_RELATIVE_SIGMA` of its value, or with a range open on a side, a
+    parameter is only bounded.
     """
     n = len(theta)
     offsets = np.array(PROFILE_OFFSETS)

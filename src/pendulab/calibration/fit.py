@@ -5,43 +5,38 @@ the squared error to the logged positions (and angles, for logs with the pendulu
 
 Method
 ------
-*Model.* The equations are :func:`pendulab.model.plant.plant_equations` under the true (switching)
-stick-slip law, compiled to C (:mod:`pendulab.calibration._replay`), several parameter sets at once.
+*Model.* :func:`pendulab.model.plant.plant_equations` under the true (switching) stick-slip law, compiled to C
+(:mod:`pendulab.calibration._replay`), several parameter sets at once. A search finds the basin, a polish on the true
+law's replay the answer, and a check replays the whole logs with it. Every decision between answers compares their
+replay errors (:func:`pendulab.calibration._polish.replay_errors`: their cost on what was searched, their RMS on the whole logs).
 
-Three stages: a search finds the basin, a polish on the true law's replay finds the answer, and a check replays the
-whole logs with it. Every decision between answers compares their replay errors (:func:`pendulab.calibration._polish.replay_errors`:
-their cost on what was searched, their RMS on the whole logs).
+*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the one-sample prediction
+errors of an observer of the replay (the replay itself is a needle as an objective), from the start (:func:`ramp_start`,
+one rule for the Python API and ``pendulab fit``) and, the cart alone, the logs' own estimate (:mod:`pendulab.calibration._start`).
+Long logs are searched on at most :data:`STAGE_SECONDS` of them (:data:`PIECE_SECONDS` windows where the cart stops and
+starts most). An upright pendulum's replay restarts from the observer's state estimates, each settled to replay its
+stretch best (:func:`pendulab.calibration._polish.settled`). ``regularization`` adds a weak prior, ``(p/p0 - 1)^2 / 2``
+per parameter: what the logs cannot show keeps its start.
 
-*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the one-sample
-prediction errors of an observer of the replay (the replay itself is a needle as an objective), from the start
-(:func:`ramp_start`, the one rule for the Python API and ``pendulab fit``) and, the cart alone, the logs' own estimate
-(:mod:`pendulab.calibration._start`). Long logs are searched on at most :data:`STAGE_SECONDS` of them
-(:data:`PIECE_SECONDS` windows where the cart stops and starts most). An upright pendulum's replay restarts from the
-observer's state estimates, each settled to replay its stretch best (:func:`pendulab.calibration._polish.settled`).
-``regularization`` adds a weak prior, ``(p/p0 - 1)^2 / 2`` per parameter: what the logs cannot show keeps its start.
-
-*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which decides whether
-a push breaks the cart away at all, in this order, each only where the answer still misses (:func:`_polished` and after):
-scans of the thresholds and a pattern search; robust 1-D scans along what slow logs confuse (the common scale of the
-gain, the forces and the drags; the split of the drag between ``B`` and ``Beq``, also with the slip region widened);
-walks along the slip region's corner ``F2, v2``; CMA-ES around the answer (:data:`EVOLVE_ABOVE_STEPS`); the thresholds
-rescanned from the logs' own estimate (:func:`_rescanned`); the global search, CMA-ES on the replay from the start, a
-factor e either way (:data:`GLOBAL_ABOVE_STEPS`); where the cart stays in the slip region, a search along the common
-scale (:func:`_in_the_slip_region_only`); a voltage logged a sample early or late (:data:`LAG_ABOVE_STEPS`). A noisy
-logged voltage is replayed denoised (the uncertainties hold how the answer moves with the other estimate, :func:`_voltage_shift`).
+*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which decides whether a
+push breaks the cart away at all, in this order, each only where the answer still misses: scans of the thresholds and a
+pattern search; 1-D scans along what slow logs confuse (the common scale of the gain, forces and drags; the drag's split
+between ``B`` and ``Beq``, also with the slip region widened); walks along the slip region's corner ``F2, v2``; CMA-ES
+around the answer (:data:`EVOLVE_ABOVE_STEPS`); the thresholds rescanned from the logs' own estimate (:func:`_rescanned`);
+the global search, CMA-ES from the start, a factor e either way (:data:`GLOBAL_ABOVE_STEPS`); where the cart stays in the
+slip region, a search along the common scale (:func:`_in_the_slip_region_only`); a voltage logged a sample early or late
+(:data:`LAG_ABOVE_STEPS`). A noisy logged voltage is replayed denoised (:func:`_voltage_shift` floors the uncertainties).
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state (each rest of the
-cart; an upright pendulum, open-loop unstable, every 0.25 s from the fit's state estimate); the RMS and largest
-position error are reported and stored in the calibration file. A few stretches whose replay diverges (a breakaway that
-a hair of drive decides) are named and left out (:data:`DIVERGED_SHARE`). ``pendulab fit`` refuses (exit status 3) an
-answer whose replay misses by more than :attr:`FitResult.forward_limit`.
+cart; an upright pendulum every 0.25 s from the fit's state estimate); the RMS and largest position error are reported
+and stored in the calibration file. A few stretches whose replay diverges are named and left out (:data:`DIVERGED_SHARE`).
+``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than :attr:`FitResult.forward_limit`.
 
-*What the logs determine* (:func:`pendulab.calibration._polish.profile`): along each parameter (and the common scale
-and the drag split), a replay cost that rises by one effective chi-square unit both ways makes it *determined* (that
-half-width its standard uncertainty, at least 0.3 %), one way only *bounded*, flat *not identified* (it keeps its start
-value); ``v1`` is at most bounded (:data:`V1_SCATTER`); a log whose replay stays in the slip region shows ``B + Beq``,
-not its split (:func:`split_of_the_drag`). The calibration file says which (``metadata.determination``); a log that
-determines nothing is refused.
+*What the logs determine* (:func:`pendulab.calibration._polish.profile`): a replay cost that rises by one effective
+chi-square unit both ways along a parameter (and along the common scale and the drag split) makes it *determined*, one
+way only *bounded*, flat *not identified* (it keeps its start value); ``v1`` is at most bounded (:data:`V1_SCATTER`); a
+log whose replay stays in the slip region shows ``B + Beq``, not its split (:func:`split_of_the_drag`). The calibration
+file says which (``metadata.determination``); a log that determines nothing is refused.
 
 Examples
 --------
@@ -262,16 +257,14 @@ def _range_text(low: float, high: float) -> str:
 #: A fit is rejected when its forward simulation misses the logs (RMS) by more than this many encoder
 #: steps: the true values miss by about one, good fits by 1 to 12, values 16 % off or wrong units by hundreds.
 FORWARD_LIMIT_STEPS = 20.0
-#: Above this forward-simulation RMS (encoder steps) no parameter is reported determined (:func:`confidence_of`):
-#: on a slow-ramp log the search stopped with B folded into Beq (Beq +780 %, 4.5 steps) and the profile there
-#: called Beq determined to a few per cent; fits that found the log's own answer replay within 0.9 to 2.5.
+#: Above this forward-simulation RMS (encoder steps) no parameter is reported determined (:func:`confidence_of`): a slow-ramp
+#: fit stopped at 4.5 steps (Beq +780 %) had a profile calling Beq determined to a few per cent; good fits replay within 0.9-2.5.
 CONFIDENT_STEPS = 3.0
 
 
-#: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a hair of drive decides. On a 300 s
-#: log of random steps with 10 mV of voltage noise the rig's true values diverge in a few stretches (1.2 % of the samples, by up to 95 mm) and replay
-#: the others within 1.1 steps. Up to this share of the samples such stretches are named and left out of the check (:func:`_diverged`); more, and they
-#: count. One stretch may be 3 % of a short log (random steps on the unseen rig with 10 mV, 16 s: 1 of 27 stretches).
+#: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a hair of drive decides (on 300 s
+#: of random steps with 10 mV of voltage noise, the true values in 1.2 % of the samples). Up to this share of the samples such stretches are named and
+#: left out of the check (:func:`_diverged`); more, and they count. One stretch may be 3 % of a short log (16 s of random steps: 1 of 27 stretches).
 DIVERGED_SHARE = 0.05
 
 
@@ -315,12 +308,9 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
 SCAN_CYCLES = 3
 SCAN_GAIN = 0.02
 SCAN_ABOVE_STEPS = 2.0
-#: Where the cart stays in the slip region its motion is nearly quasi-static, ``gain V = (B + Beq) v + F``, which every
-#: common scale of the gain, forces and drags fits alike: only the cart's inertia shows the scale, in a shallow valley whose
-#: staircase stops the polish anywhere along it (:func:`_in_the_slip_region_only`). The unseen rig's slow ramps stopped with
-#: the force gain 8.6 % low (0.88 steps), its triangle wave 5.1 % low (0.72; 10 mV on the voltage: 7.1 %, 0.79); the profile
-#: of the gain (the others scanned and polished at each) was least within 4 % of the true gain. Searched so: 1.0 % low (0.61
-#: steps), 1.2 % low (0.70), 0.7 % high (0.77).
+#: Where the cart stays in the slip region its motion is nearly quasi-static, ``gain V = (B + Beq) v + F``, blind to a common scale of
+#: the gain, forces and drags: only the inertia shows it, in a shallow valley that stops the polish anywhere (:func:`_in_the_slip_region_only`).
+#: The unseen rig's slow ramps stopped with the gain 8.6 % low, its triangle wave 5.1 % (10 mV: 7.1 %); searched so, 1.0 % and 1.2 % low, 0.7 % high.
 SCALE_STEP = 0.04
 SCALE_STEPS = 3
 #: The stick speed ``v1`` is reported bounded, never determined, within its profile's range widened by this factor either way: it shows only in how a
@@ -328,26 +318,21 @@ SCALE_STEPS = 3
 V1_SCATTER = 1.3
 #: One walk along the valley of v2 and F2 (:func:`_polish.walk`) is polished from if it lowers the cost by this share.
 WALK_GAIN = 0.01
-#: Above this replay RMS (encoder steps) the chosen answer goes through the evolution strategy (:func:`_evolved`),
-#: with each of these seeds while it still misses: on the sticky rig's chirp, stopped at 2.31 steps, six of seven
-#: seeds found 0.9-1.6 steps (the truth: 0.97), one none lower (15 CPU-s each). The issue's bar (2 steps): from 1.5,
-#: two unjudged corpus fits gained 0.05 steps for 5 CPU-s each, and the 25 s bench log 0.3 steps for 5 of its 17 CPU-s.
+#: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the evolution strategy (:func:`_evolved`), with each of these
+#: seeds while it still misses: on the sticky rig's chirp, stopped at 2.31 steps, six of seven seeds found 0.9-1.6 (the truth: 0.97; 15 CPU-s each).
 EVOLVE_ABOVE_STEPS = 2.0
 EVOLVE_SEEDS = (19, 20)
 #: Pattern-search steps of the polish, and the samples it may replay (parameter sets x samples; about 0.5 us each):
 #: ~700 sets over 20 s of log, a bound on its time that, unlike a clock, gives the same answer on a busy machine.
 POLISH_ITER = 12
 POLISH_WORK = 1.4e7
-#: Above this replay RMS (encoder steps, the issue's bar) the answer goes through the global search (:func:`_evolved`): CMA-ES on the replay from the
-#: start, GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, with each seed while it still misses. It is the last resort, and
-#: a lucky one: on the unseen rig's triangle wave, stopped at 4.5 steps with B folded into Beq, 3 of 8 seeds found the rig's basin (10 mV on its
-#: voltage: 1 of 8; a BLAS-free CMA-ES tried instead: 2 and 1 of 8), the others none better, about 7-13 CPU-s each. The split's scan
-#: with F2 out of the way (:data:`_polish.SLIP_F2_FACTORS`) now leaves that trap before. A seed still above the answer's cost halfway gives up.
+#: Above this replay RMS (encoder steps) the answer goes through the global search (:func:`_evolved`): CMA-ES on the replay from the start,
+#: GLOBAL_SIGMA (log units) either way, GLOBAL_GENERATIONS generations, each seed while it still misses (one above the answer's cost halfway gives
+#: up). The last resort, and a lucky one: on the unseen rig's triangle wave stopped at 4.5 steps, 3 of 8 seeds found the rig's basin (7-13 CPU-s each).
 GLOBAL_ABOVE_STEPS = 2.0
-#: Where the answer still misses (GLOBAL_ABOVE_STEPS), the thresholds are first scanned from the logs' own estimate with F2 out of the way (times
-#: RESCAN_F2), each of RESCAN's (name, log span) over RESCAN_POINTS, RESCAN_ROUNDS times, then evolved and polished (:func:`_rescanned`). The sticky
-#: rig's slow ramps (its cart leaves the slip region at v2, then slides at 0.3 m/s): v2 0.2 % off the truth multiplies the replay cost by 600,
-#: F1 0.5 % by 57, and every search starting a few % off (the estimate: v2 +8.9 %) ended where F2 (-36 %) triggers the escape instead, at 3.5 steps.
+#: Where the answer still misses (GLOBAL_ABOVE_STEPS), the thresholds are first scanned from the logs' own estimate with F2 times RESCAN_F2, each of
+#: RESCAN's (name, log span) over RESCAN_POINTS, RESCAN_ROUNDS times, then evolved and polished (:func:`_rescanned`): on the sticky rig's slow ramps,
+#: v2 0.2 % off multiplies the replay cost by 600, and every search from a few % off ended where F2 (-36 %) triggers the escape, at 3.5 steps.
 RESCAN = (("v2", 0.2), ("F1", 0.1), ("v1", 1.5), ("v2", 0.02), ("F1", 0.02))
 RESCAN_POINTS = 64
 RESCAN_ROUNDS = 2
@@ -355,36 +340,27 @@ RESCAN_F2 = 2.0
 GLOBAL_SEEDS = (1, 2, 3, 4)
 GLOBAL_SIGMA = 1.0
 GLOBAL_GENERATIONS = 200
-#: A logged voltage may lead or lag what the motor got (loggers differ on whether a row holds the voltage applied from its time on or the one that
-#: brought the cart there). Where the answer misses by more than LAG_ABOVE_STEPS, a shift :func:`_voltage_lag` finds (LAG_PROBE_ITER observer
-#: iterations) is fitted again (then probed a sample further, up to MAX_LAG), kept if the logs replay within LAG_KEEP times the answer's RMS. Random
-#: steps and a chirp (12 s), the voltage a sample early or late, missed by 2.9-4.9 steps (random steps: every value 2-26 % off, called determined);
-#: the shift cost 0.54-0.73 times, the wrong one 1.8-2.4, logs without a lag 1.0-2.0 (slow ramps, sweeps, the closed loop, with and without voltage
-#: noise); fitted shifted, 0.7-0.8 steps, also 2 and 3 samples off. The replay polished as the probe missed the chirp's shift (1.7 times) and took
-#: slow ramps' wrong one (0.66).
+#: A logged voltage may lead or lag what the motor got (loggers differ). Where the answer misses by more than LAG_ABOVE_STEPS, a shift :func:`_voltage_lag`
+#: finds (LAG_PROBE_ITER observer iterations) is fitted again (then probed a sample further, up to MAX_LAG), kept if the logs replay within LAG_KEEP
+#: times the answer's RMS. Random steps and a chirp logged a sample off missed by 2.9-4.9 steps (every value 2-26 % off, "determined"); the right
+#: shift cost 0.54-0.73 times, the wrong one 1.8-2.4, logs without a lag 1.0-2.0; fitted shifted, 0.7-0.8 steps (a replay probe erred both ways).
 LAG_ABOVE_STEPS = 2.0
 LAG_PROBE_ITER = 8
 LAG_GAIN = 0.9
 LAG_KEEP = 0.7
 MAX_LAG = 3
-#: With the pendulum the logs cannot tell a voltage logged a sample early or late from one on time (the voltage follows
-#: the motion: the observer probe's cost ratios were 0.90-1.08 either way, with and without a lag), so each determined
-#: parameter is uncertain at least by how far the voltage shifted a sample either way moves it (:func:`_spread`).
-#: The unseen rig's closed loop logged a sample off replayed at 1.7-2.4 steps with Beq 2.8-3.1 % off, reported to +-0.3 %.
+#: With the pendulum the logs cannot tell a voltage logged a sample early or late from one on time (the voltage follows the motion: the probe's cost
+#: ratios 0.90-1.08), so each determined parameter is uncertain at least by how far such a shift moves it (:func:`_spread`): the unseen rig's closed
+#: loop logged a sample off replayed at 1.7-2.4 steps with Beq 2.8-3.1 % off, reported to +-0.3 %.
 LAG_SPREAD_SHIFTS = (-1, 1)
-#: Without the pendulum a shift counts where the logs cannot tell it: after its Gauss-Newton step they replay at less
-#: than LAG_TOLD times the answer's cost. Slow ramps of the heavy rig, the voltage a sample early: the shift that undoes
-#: it 0.78, the other 1.85, and the common scale 1.5 % off at z up to 2.6, now 0.8. A sample late, it is not enough: 2.46
-#: for the shift that undoes it, 1.50 the other, the scale 3 % off at z 3.1 still. The development corpus's logs without
-#: a lag: 0.64-45, 14 of 54 shifts below 1.5 (a fit short of its optimum, or a log that cannot tell). With the pendulum every shift counts:
-#: a closed loop a sample off showed 5.0 and 6.5 (the restarts, settled at the answer, take up the lag), one on time 26-27.
+#: Without the pendulum a shift counts only where the logs cannot tell it: after its Gauss-Newton step they replay at less than LAG_TOLD times the
+#: answer's cost (slow ramps of the heavy rig a sample early: the undoing shift 0.78, the other 1.85; the corpus's logs without a lag 0.64-45). With
+#: the pendulum every shift counts (the restarts, settled at the answer, take up a lag: a closed loop a sample off showed 5.0 and 6.5).
 LAG_TOLD = 1.25
-#: A log's first state is the smoothed one (its speed the smoothing's edge, which makes a cart that breaks away there
-#: 0.005-0.015 m/s fast): where its speed is between this (m/s) and MOVING_START, the answer's move with the cart at rest
-#: there instead counts in the uncertainties, whatever it costs (:func:`_spread`). A triangle wave from 3 V at its
-#: first sample: the replay misses its first stretch by 450 um, the true values replay at 3.9 steps, the answer 1.35
-#: with v2 -19 % and B -10 % at z 7 and 3. (Started at rest outright the true values replay at 0.84, but 14 of the
-#: corpus's 32 answers moved and 4 failed the bar that passed.)
+#: A log's first state is the smoothed one (its speed the smoothing's edge: 0.005-0.015 m/s for a cart breaking away there): where its speed is
+#: between this (m/s) and MOVING_START, the answer's move with the cart at rest there instead counts in the uncertainties (:func:`_spread`). A
+#: triangle wave from 3 V at its first sample: the true values replay at 3.9 steps, the answer 1.35 with v2 -19 % at z 7 (started at rest
+#: outright instead, 14 of the corpus's 32 answers moved and 4 failed the bar).
 FIRST_AT_REST = 1e-3
 #: A log whose cart is faster than this (m/s) at its first sample starts moving: its first state is settled
 #: (:func:`_observer_search`). A cart breaking away at its first sample shows 0.01-0.015 m/s there (the smoothing's
@@ -651,10 +627,9 @@ def _replay_rms(setup: _Setup, replays: list[_polish.Anchors], theta: np.ndarray
 
 
 def _evolved(setup: _Setup, answer: _Answer, globally: bool = False, quiet: bool = False) -> _Answer:
-    """Stage 2, last: the evolution strategy around the answer (:func:`_polish.evolve`) and the polish where it misses
-    (:data:`EVOLVE_ABOVE_STEPS`), or ``globally`` the global search (:data:`GLOBAL_ABOVE_STEPS`); not globally with the
-    pendulum (its replay costs several times the cart's; on the sticky rig's closed loop, at 3.35 steps, three seeds
-    took 85 CPU-s and found nothing the bar accepts)."""
+    """Stage 2: CMA-ES around the answer (:func:`_polish.evolve`) and the polish where it misses (:data:`EVOLVE_ABOVE_STEPS`), or
+    ``globally`` the global search (:data:`GLOBAL_ABOVE_STEPS`); not with the pendulum, whose replay costs several times the cart's
+    (the sticky rig's closed loop at 3.35 steps: three seeds took 85 CPU-s and found nothing the bar accepts)."""
     searched, space, result = answer.searched, setup.space, answer.polished
     above, seeds = (GLOBAL_ABOVE_STEPS, GLOBAL_SEEDS) if globally else (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS)
     if answer.rms <= above * setup.step or (globally and setup.with_pendulum):
@@ -777,14 +752,11 @@ def shifted_voltage(V: np.ndarray, lag: int) -> np.ndarray:
 
 
 def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
-    """How far (log units) the best common scale of the gain, forces and drags moves from ``theta`` when the other
-    estimate of the applied voltage, the logged one, is replayed instead of the answer's denoised one.
-
-    The motor saw neither: the gap is a floor of those parameters' uncertainty. On the heavy rig's triangle wave with
-    10 mV the answer's scale was 3.5 % low and reported to +-0.8 %; the logged voltage's best scale lies 2 % higher.
-    Two batched scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours). No floor (0) where
-    the first has its least cost at an end: the logged voltage's replay does not follow the logs (on a 10 min log with
-    10 mV it diverged in a stretch, its cost flat in the scale, and every scaled value's uncertainty was floored at 12 %).
+    """How far (log units) the best common scale of the gain, forces and drags moves from ``theta`` when the logged voltage
+    is replayed instead of the answer's denoised one: the motor saw neither, so the gap floors their uncertainty (the heavy
+    rig's triangle wave with 10 mV: the scale 3.5 % low, reported to +-0.8 %; the logged voltage's best 2 % higher). Two batched
+    scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours); 0 where the first's least cost is at
+    an end: that replay does not follow the logs (a 10 min log with 10 mV diverged in a stretch, its cost flat in the scale).
     """
     logged = _pieces_of(setup, answer.candidate.logged, answer.candidate.whole)
     centre, span = 0.0, 0.1
@@ -799,12 +771,10 @@ def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
 
 def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[int], told: float) -> tuple[np.ndarray, list[str]]:
     """How far (scaled) each of the ``determined`` parameters moves, the largest over what the logs may not tell (the voltage
-    shifted by :data:`LAG_SPREAD_SHIFTS` samples; a log that starts with the cart moving slower than :data:`MOVING_START`,
-    started at rest instead: :data:`FIRST_AT_REST`): one Gauss-Newton step from ``theta`` each (central differences of
-    relative step 3e-3, as :func:`_polish.profile`'s), the others held. A shift after whose step the logs still replay at
-    ``told`` times the cost or more is told apart by them and not counted; the first state at rest always counts (the
-    answer adapted to the smoothed one, so one step does not show how well the logs replay from rest). Zero for the
-    rest; and what counted."""
+    shifted by :data:`LAG_SPREAD_SHIFTS` samples; a first state slower than :data:`MOVING_START` at rest instead, :data:`FIRST_AT_REST`):
+    one Gauss-Newton step from ``theta`` each (central differences as :func:`_polish.profile`'s), the others held, zero for the rest;
+    and what counted. A shift after whose step the logs replay at ``told`` times the cost or more is told apart and not counted;
+    the first state at rest always counts (one step from an answer adapted to the smoothed state does not show the replay from rest)."""
     spread, counted = np.zeros(theta.size), []
     if not determined:
         return spread, counted
