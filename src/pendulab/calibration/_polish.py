@@ -73,6 +73,13 @@ def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple
     return [(int(b), int(e) + w - 1) for b, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]  # begins, ends
 
 
+def _line(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
+    """``(value at t = 0, slope)`` of the least-squares line through ``(t, x)``: by :func:`pendulab.exact.lstsq`, not
+    ``numpy.polyfit``, whose LAPACK call gave other last bits with OpenBLAS's AVX2 kernels than with its SSE3 ones."""
+    slope, value = exact.lstsq(np.column_stack([t, np.ones_like(t)]), x)
+    return float(value), float(slope)
+
+
 def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarray, step: float, with_pendulum: bool) -> Anchors:
     """Restarts of one log: its rests, and for an upright pendulum the fit's state every window.
 
@@ -87,16 +94,14 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
             # A log that starts at rest starts from the rest's line, not from a smoothed speed: a stuck
             # cart keeps a speed below v1 (decaying over Mc/Beq), and 1 mm/s too much is a lasting 0.1 mm.
             hi = min(spans[0][1], 3 * w)
-            slope, value = np.polyfit(log.t[:hi] - log.t[0], log.x[:hi], 1)
-            x0[:2] = [float(value), float(slope)]
+            x0[:2] = _line(log.t[:hi] - log.t[0], log.x[:hi])
         for first, stop in spans:
             # Late in the rest, where the creep has died down; position and speed from a line through
             # the positions around that sample (the encoder's steps average out over it).
             k = max(first, stop - w)
             if 0 < k < used - 1:
                 lo, hi = max(first, k - 2 * w), min(stop, k + w)
-                slope, value = np.polyfit(log.t[lo:hi] - log.t[k], log.x[lo:hi], 1)
-                restarts[k] = np.array([float(value), float(slope), 0.0, 0.0])
+                restarts[k] = np.r_[_line(log.t[lo:hi] - log.t[k], log.x[lo:hi]), 0.0, 0.0]
     if with_pendulum and float(np.median(np.abs(log.alpha))) < math.pi / 2:  # upright
         every = max(1, int(round(UNSTABLE_WINDOW / (node_stride * log.period))))
         restarts.update({j * node_stride: nodes[:, j].copy() for j in range(every, nodes.shape[1] - 1, every)})
