@@ -474,8 +474,8 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
     The replay's error is not smooth in the parameters (a breakaway that happens or not is a jump), so derivatives
     mislead. The thresholds ``scan``, whose jumps dominate, are first scanned one by one, ``scan_rounds`` times, over
     ``scan_spans`` (coarse then fine, 15 factors log-spaced within ``1 + span`` either way). Each iteration tries every
-    parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of :data:`PAIRS` (the
-    slip region's corner, the two forces, ``Beq`` against the gain: each pair sets one speed or force) and the last good
+    parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of :data:`PAIRS` (pairs that
+    trade off: the slip region's corner, the two forces, ``Beq`` against the gain) and the last good
     move, in one batched replay, and keeps the best if it lowers the cost; else the radius shrinks threefold, down to
     0.1 %. Bounds and ``F1 <= F2``, ``v1 <= v2`` hold by projection. It stops once it has replayed ``work`` samples
     (parameter sets x samples; see fit.POLISH_WORK).
@@ -688,7 +688,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     Each parameter and each joint direction of :func:`directions_of` (the common scale; the drag split) is moved by
     :data:`PROFILE_OFFSETS` (log units; four times those in logit units for the split) both ways. The threshold is one
     effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error at the answer, ``k`` its
-    :func:`correlation_length`), at least one stretch's cost. A side where the cost crosses it bounds the move there
+    :func:`correlation_length`), at least a stretch's mean cost. A side where the cost crosses it bounds the move there
     (interpolated; for :data:`THRESHOLDS`, whose cost is a staircase, the first offset above). Crossed both ways, the
     parameter is determined, uncertain by the larger half-width, at least the linearized covariance (central differences
     of relative ``step``, in the same batched replay) and its change along a joint direction's half-width. A joint
