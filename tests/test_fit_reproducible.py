@@ -119,14 +119,11 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer, 
 
 RESTARTS_SCRIPT = """
 import hashlib, numpy as np
-from pendulab.calibration import _polish  # private: the replay's restarts are what this checks
-from pendulab.calibration.fit import _initial_states, _noise_level  # private: the fit's own state estimates
+from fit_helpers import prepared  # the log's restarts as the fit makes them
 from pendulab.calibration.synthetic import RIGS, synthetic_log
 digest = hashlib.sha256()
 for shape, rig in (("ramps with holds", "unseen"), ("random steps", "sticky"), ("chirp", "heavy drag, weak drive")):
-    log = synthetic_log(shape, RIGS[rig], duration=8.0, voltage_noise=0.01)
-    used = ((len(log) - 1) // 10) * 10 + 1
-    a = _polish.anchors(log, used, _initial_states(log, False)[:used:10].T.copy(), 10, np.array([_noise_level(log.x[:used])]), RIGS[rig].q_x, False)
+    (a,), _ = prepared(synthetic_log(shape, RIGS[rig], duration=8.0, voltage_noise=0.01), RIGS[rig].q_x)
     assert len(a.restarts) >= 3
     for state in [a.x0, *(a.restarts[k] for k in sorted(a.restarts))]:
         digest.update(np.asarray(state).tobytes())
@@ -138,6 +135,8 @@ def test_the_replays_restarts_are_bitwise_the_same_with_any_blas_kernel():
     """The restarts' states (a line through each rest's positions) that every replay of a cart log starts from: with
     OpenBLAS's kernels for this CPU and with its SSE3 ones (``OPENBLAS_CORETYPE=Prescott``). Through ``numpy.polyfit``
     they differed in their last bits on an AVX2 machine; :func:`pendulab.exact.lstsq` gives the same."""
-    runs = [subprocess.run([sys.executable, "-c", RESTARTS_SCRIPT], env={**os.environ, **extra}, capture_output=True, text=True, check=True,
-                           timeout=600).stdout.strip() for extra in ({}, {"OPENBLAS_CORETYPE": "Prescott"})]
+    tests = os.path.dirname(os.path.abspath(__file__))  # for fit_helpers
+    path = os.pathsep.join(filter(None, [tests, os.environ.get("PYTHONPATH", "")]))
+    runs = [subprocess.run([sys.executable, "-c", RESTARTS_SCRIPT], env={**os.environ, "PYTHONPATH": path, **extra}, capture_output=True, text=True,
+                           check=True, timeout=600).stdout.strip() for extra in ({}, {"OPENBLAS_CORETYPE": "Prescott"})]
     assert len(runs[0]) == 64 and runs[0] == runs[1]
