@@ -1,48 +1,52 @@
-"""The fit's escapes from a wrong basin (issue 19) on the unseen rig's triangle wave (3 V, 0.4 Hz).
+"""The fit's global search (issue 19) on the unseen rig's slow logs, where the cart stays in the slip region.
 
-The cart stays in the slip region there, leaving it only by force near the peaks. From every start the observer
-search and the polish folded the slip drag ``B`` into ``Beq`` (``B`` -99.9 %, ``Beq`` +900 %, ``F2 = F1``) and replayed
-the log 4.5 encoder steps off, against the rig's own values' 1.27. Only the global search's luckier seeds found the
-rig's basin (1 of 8 with 10 mV on the voltage). The scan of the drag's split now also tries the slip region with ``F2``
-out of the way (``_polish.SLIP_F2_FACTORS``): the drive left the slip region at ``F2`` right after each breakaway, so no
-share of ``B`` could lower the cost (tests/test_fit_scans.py shows the scan with and without it). And where the cart stays in the slip region, the common scale of the gain, forces
-and drags is searched (``fit._in_the_slip_region_only``): the polish stopped with the force gain 5-7 % low.
+Slow ramps with holds (up to 1.6 V) and a triangle wave (3 V, 0.4 Hz) keep the cart in the slip region, leaving it only
+by force near the peaks: the replay sees ``B + Beq`` and, through the inertia alone, the common scale of the gain,
+forces and drags. The local stages (the polish's pattern search, the scans along the joint directions, the walk along
+``F2, v2``) stop in the staircase the thresholds make of the replay cost: on the slow ramps with the force gain 6.6 %
+low (``Beq`` +12 % before the short rests restarted the position only), on the triangle with ``Beq`` -15 %. CMA-ES from
+the observer search's answer (``fit.AROUND_SIGMA``) steps over that staircase and finds the rig's basin.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from pendulab.calibration.fit import GLOBAL_ABOVE_STEPS, fit_parameters
+from pendulab.calibration.fit import fit_parameters
 from pendulab.calibration.synthetic import corpus, held_out
 from pendulab.model.parameters import PlantParameters
 
+#: Per case, the bound asserted on the relative error of Beq and of the force gain. Measured (this note's machine):
+#: the ramps Beq -0.9 %, gain -1.6 % (0.55 steps); the triangle -0.5 %, -0.1 % (0.60); the triangle with 10 mV on the
+#: voltage -0.1 %, +4.8 % (0.64): within the issue's 5 % by 0.2 points, too close to assert the bar itself there.
+CASES = {"ramps with holds | unseen | 0 mV": 0.05, "triangle | unseen | 0 mV": 0.05, "triangle | unseen | 10 mV": 0.065}
 
-def _case(noise: str):
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_the_global_search_finds_the_rigs_basin_where_the_cart_stays_in_the_slip_region(name):
     cases = corpus()
-    case = next(c for c in cases if c.name == f"triangle | unseen | {noise}")
+    case = next(c for c in cases if c.name == name)
     assert case.name not in held_out(cases)
-    return case
-
-
-@pytest.mark.parametrize("noise", ["0 mV", "10 mV"])
-def test_the_split_scan_leaves_the_basin_where_the_local_stages_fold_B_into_Beq(noise):
-    case = _case(noise)
     said: list[str] = []
     result = fit_parameters([case.log()], PlantParameters.preset("none"), on_progress=said.append)
-    assert any(s.startswith("scans along scale, split") for s in said), said
-    assert not any(s.startswith("the global search") for s in said), said  # no seed's luck
-    assert any(s.startswith("the cart stays in the slip region") for s in said), said
+    assert any(s.startswith("CMA-ES from the search's answer") for s in said), said  # the global search moved the answer
+    assert any("beyond the slip region in only" in s for s in said), said  # and the log is one that stays in it
     true = case.params
     steps = result.forward_rms / result.encoder_step
-    # Measured: 0.70 steps; force gain -1.2 %, F1 -1.2 %, B -0.2 %, Beq -11.3 % (10 mV: 0.77 steps; +0.7, +0.3, +1.2, -3.7 %).
-    # Beq and B are only bounded here: the cart stays in the slip region, where the replay sees mostly their sum.
-    assert result.forward_ok and steps <= GLOBAL_ABOVE_STEPS, steps
-    assert abs(result.values["force_gain"] / true.force_gain - 1) < 0.05, result.values["force_gain"]
-    for name in ("F1", "B", "Beq"):
-        assert abs(result.values[name] / getattr(true, name) - 1) < 0.15, (name, result.values[name])
-    # Every range it reports holds the rig's value.
-    for name, (low, high) in result.allowed.items():
-        assert result.determination[name] == "determined" or low <= getattr(true, name) <= high, (name, low, high)
-    for name, status in result.determination.items():
-        assert status != "not identified" or result.values[name] == result.initial[name], (name, result.values[name])
+    assert result.forward_ok and steps <= 1.5, steps  # the issue's bar: 2 (measured 0.55-0.64)
+    for name_ in ("Beq", "force_gain"):
+        assert abs(result.values[name_] / getattr(true, name_) - 1) < CASES[name], (name_, result.values[name_])
+    # A determined parameter within 3 of its uncertainties; a range holds the rig's value. Not F2's on the triangle: its
+    # range (where the cost stays within twice the answer's, bounded from below only) starts 0.6 % above the rig's
+    # value (+16 % with 10 mV), whose own values replay the log at 3.9 times the answer's cost (its first state's speed,
+    # smoothed, 15 mm/s where the cart breaks away from rest).
+    for name_, (low, high) in result.allowed.items():
+        status = result.determination[name_]
+        value = getattr(true, name_)
+        if name_ == "F2" and name.startswith("triangle"):
+            assert status != "determined" and high == float("inf"), (status, high)
+            continue
+        assert (status == "determined" and abs(result.values[name_] - value) <= 3 * result.uncertainty[name_]) or low <= value <= high, (
+            name_, status, low, high)
+    for name_, status in result.determination.items():
+        assert status != "not identified" or result.values[name_] == result.initial[name_], (name_, result.values[name_])

@@ -27,10 +27,10 @@ def _searched_on_pieces(monkeypatch):
     seen = {}
     evolved = fit_module._evolved
 
-    def spy(setup, answer, globally=False):
-        if not globally:  # the polish's answer (the global search gets the local evolution's)
+    def spy(setup, answer, start="answer", quiet=False):
+        if start == "search":  # the polish's answer (the later searches get the global search's)
             seen["setup"], seen["answer"] = setup, answer
-        return evolved(setup, answer, globally)
+        return evolved(setup, answer, start, quiet)
 
     monkeypatch.setattr(fit_module, "_evolved", spy)
     log = synthetic_log("random steps", RIGS["unseen"], duration=4.0, voltage_noise=0.0)

@@ -120,7 +120,7 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
     ``observer`` outputs (1: the position; 2: and the angle).
 
     The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where
-    ``r > 0.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny],
+    ``r > 0.5``, its positions only, the speeds carried on, where ``r > 1.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny],
     corrected[4])``, the correction times ``c`` (1 after a sample's last chunk, else 0). Only the parameters ``free``
     (indices into :meth:`PlantParameters.names`) are inputs; the others are the constants ``fixed``, so that a cart
     without a pendulum loses every pendulum term.
@@ -136,7 +136,8 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
         corrected = predicted + c * ca.mtimes(gain, y - measured)
         return ca.Function("observe_step", [s, V, t, y, gain, c, theta, h], [corrected, measured, corrected])
     r, sr = ca.SX.sym("r"), ca.SX.sym("sr", 4)
-    return ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(ca.if_else(r > 0.5, sr, s), V, p, t, h)])
+    restarted = ca.if_else(r > 1.5, ca.vertcat(sr[0], s[1], sr[2], s[3]), ca.if_else(r > 0.5, sr, s))  # r 2: the positions only
+    return ca.Function("replay_step", [s, V, t, r, sr, theta, h], [step(restarted, V, p, t, h)])
 
 
 @lru_cache(maxsize=None)
@@ -247,15 +248,8 @@ def prepare(params: PlantParameters, periods: Sequence[float], free: Sequence[st
     return compiled
 
 
-def replay(
-    params: list[PlantParameters] | np.ndarray,
-    V: np.ndarray,
-    t: np.ndarray,
-    x0: np.ndarray,
-    restarts: dict[int, np.ndarray] | None = None,
-    *,
-    free: Sequence[str] | None = None,
-) -> np.ndarray:
+def replay(params: list[PlantParameters] | np.ndarray, V: np.ndarray, t: np.ndarray, x0: np.ndarray, restarts: dict[int, np.ndarray] | None = None, *,
+           free: Sequence[str] | None = None) -> np.ndarray:
     """States after each logged sample for one or several parameter sets, ``(m, n, 4)``.
 
     Parameters
@@ -269,7 +263,8 @@ def replay(
     x0 : array (4,)
         State at ``t[0]``.
     restarts : dict, optional
-        ``{k: state}``: the replay continues from ``state`` at ``t[k]`` (before step ``k``).
+        ``{k: state}``: the replay continues from ``state`` at ``t[k]`` (before step ``k``); where the state's
+        speed is nan, from its positions with the replay's own speeds.
     free : sequence of str, optional
         The parameters that differ between the sets (default: all). The others take the first set's
         values and are compiled in as constants, which makes the replay faster.
@@ -291,7 +286,7 @@ def replay(
     r, sr = np.zeros(n), np.zeros((n, 4))
     for k, state in (restarts or {}).items():
         if 0 <= k < n:
-            r[k], sr[k] = 1.0, state
+            r[k], sr[k] = (2.0 if np.isnan(state[1]) else 1.0), np.nan_to_num(state)  # a nan speed: the replay's own
     run = _compiled(*key, single=m == 1)
     if run is None:
         return _in_vm(_sample(*key), x0, [V[None], t[None], r[None], sr.T], P, h)[0]
