@@ -54,13 +54,17 @@ def main() -> int:
     from pendulab.calibration._replay import replay  # private: times the fit's own compiled replay, the unit of the fit's cost
     from pendulab.calibration.fit import fit_parameters
     from pendulab.calibration.synthetic import RIGS, synthetic_log
+    from pendulab.errors import FitRejected
     from pendulab.model.parameters import PlantParameters
     from pendulab.model.plant import PlantModel
 
     true = RIGS["unseen"]
     start = PlantParameters.preset("none")
     warm = synthetic_log("ramps with holds", true, duration=4.0, voltage_noise=0.0)
-    fit_parameters([warm], start)  # compiles and caches the fit's C functions
+    try:
+        fit_parameters([warm], start)  # compiles and caches the fit's C functions
+    except FitRejected:  # 4 s of slow ramps may determine nothing (the cart stays in the slip region): compiled all the same
+        pass
     ok = True
     for duration in [float(d) for d in args.durations.split(",")]:
         log = synthetic_log("ramps with holds", true, duration=duration, voltage_noise=0.0)
