@@ -66,7 +66,7 @@ def test_a_log_beyond_the_slip_region_keeps_what_the_profile_says(shape, rig):
 @pytest.mark.parametrize(("shape", "slow"), [("ramps with holds", True), ("triangle", True), ("random steps", False)])
 def test_a_replay_in_the_slip_region_sees_the_split_only_where_the_cart_creeps_to_a_stop(shape, slow):
     # SPEC §2: inside the slip region the drag is B + Beq, beyond it Beq alone, and while the cart sticks (slower than v1)
-    # Beq alone still acts on its creep. On the unseen rig's slow logs (the fit's misses of Beq: 11-12 %, reported bounded)
+    # Beq alone still acts on its creep. On the unseen rig's slow logs (the fit once missed Beq by 11-12 % there, reported bounded)
     # moving 30 % of Beq into B, or 10 % of B into Beq, moves an 8 s replay by 0.11-0.17 mm at most, and by 5-15 um with
     # v1 at 0.1 mm/s (no creep); random steps on the same rig, which leave the slip region, by 39-77 mm.
     p = RIGS["unseen"]

@@ -106,7 +106,7 @@ def test_a_short_rest_restarts_the_position_only_so_a_creeping_cart_tells_its_dr
     # for the true values, 0.75 and 0.97 for Beq 5 and 10 % high, 0.70 and 1.01 for 5 and 10 % low.
     from fit_helpers import prepared
 
-    from pendulab.calibration._polish import RESTART_REST
+    from pendulab.calibration._polish import RESTART_REST  # private: the short-rest restart rule is what this checks
     from pendulab.calibration.synthetic import RIGS
 
     p = RIGS["unseen"]
