@@ -592,13 +592,17 @@ def walk(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float) -> t
 EVOLVE_SIGMA = 0.02
 EVOLVE_GENERATIONS = 40
 EVOLVE_POPULATION = 16
+#: :func:`evolve` stops when its best cost fell by less than STALL_GAIN over the last STALL_GENERATIONS generations: on a 25 s
+#: log of slow ramps a run that had found its basin by generation 80-160 spent the rest of its 200 improving the cost by 1e-5.
+STALL_GENERATIONS = 25
+STALL_GAIN = 1e-3
 
 
 def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, seed: int = 19, sigma: float = EVOLVE_SIGMA,
            generations: int = EVOLVE_GENERATIONS, give_up: tuple[int, float] | None = None) -> tuple[np.ndarray, float]:
     """CMA-ES (:mod:`cma`) on the replay cost around ``theta`` (of cost ``cost``), in log coordinates, its first step
-    ``sigma``, for at most ``generations`` of :data:`EVOLVE_POPULATION`; ``give_up=(g, c)`` stops it after ``g``
-    generations if it has found no cost below ``c`` by then.
+    ``sigma``, for at most ``generations`` of :data:`EVOLVE_POPULATION`, or until it stalls (:data:`STALL_GENERATIONS`);
+    ``give_up=(g, c)`` stops it after ``g`` generations if it has found no cost below ``c`` by then.
 
     Derivative-free with a population per step, it steps over the replay cost's small jumps and learns the joint moves the
     pattern search's fixed directions miss; with a step of a factor e, from the start, it is the fit's global search.
@@ -612,10 +616,14 @@ def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, se
     try:
         options = {"popsize": EVOLVE_POPULATION, "seed": seed, "verbose": -9, "maxiter": generations, "tolx": 1e-4}
         es = cma.CMAEvolutionStrategy(list(np.log(np.maximum(theta, 1e-12))), sigma, options)
+        best_by_generation = []
         while not es.stop():
             U = np.round(np.array(es.ask()), 9)
             es.tell(list(U), list(costs(logs, space, np.array([space.project(np.exp(u)) for u in U]))))
+            best_by_generation.append(float(es.result.fbest))
             if give_up and es.countiter >= give_up[0] and es.result.fbest >= give_up[1]:
+                break
+            if len(best_by_generation) > STALL_GENERATIONS and best_by_generation[-1] >= (1 - STALL_GAIN) * best_by_generation[-1 - STALL_GENERATIONS]:
                 break
         best, best_cost = space.project(np.exp(np.asarray(es.result.xbest))), float(es.result.fbest)
     finally:

@@ -629,7 +629,7 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
     from the start (:data:`GLOBAL_ABOVE_STEPS`). The last two not with the pendulum: its replay costs several times the cart's."""
     searched, space, result = answer.searched, setup.space, answer.polished
     above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, GLOBAL_SEEDS)}[start]
-    if answer.rms <= above * setup.step or (start != "answer" and setup.with_pendulum):
+    if answer.rms <= above * setup.step or (start != "answer" and setup.with_pendulum) or len(setup.names) < 2:  # one parameter: the polish's scans
         return answer
     for i, seed in enumerate(seeds):
         if result.cost <= _cost_of(setup, searched, above) or (start == "search" and result is not answer.polished):

@@ -16,6 +16,7 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -97,6 +98,18 @@ def _measured(t: np.ndarray, V: np.ndarray, x: np.ndarray, q: float, noise: floa
     return RampLog(t, V, x, alpha=alpha, source=source)
 
 
+def _frozen(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``arrays`` made read-only: a cached run is shared by every log made from it (:func:`_measured` copies)."""
+    for array in arrays:
+        array.flags.writeable = False
+    return arrays
+
+
+#: The runs behind the synthetic logs are cached in the process (a run costs about 0.1 ms of Python per sample, and the
+#: tests and the corpus ask for each one several times: with and without voltage noise, from several tests).
+RUNS_CACHED = 64
+
+
 def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 20.0, *, noise: float = 1e-5,
                   voltage_noise: float = 0.01, seed: int = 0, cart_hold: float = 0.35) -> RampLog:
     """A log of an open-loop ``shape`` (:func:`voltage_profile`) on the rig ``params``.
@@ -104,6 +117,13 @@ def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 
     A slow outer loop keeps the cart on its track: the profile is added to a weak position feedback
     (blocks of 0.1 s, as a TA would).
     """
+    V, x = _open_loop_run(shape, params, float(duration), seed, cart_hold)
+    return _measured(np.arange(x.size) * STEP, V, x, params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")
+
+
+@lru_cache(maxsize=RUNS_CACHED)
+def _open_loop_run(shape: str, params: PlantParameters, duration: float, seed: int, cart_hold: float) -> tuple[np.ndarray, ...]:
+    """:func:`synthetic_log`'s run: the voltage (0 after the last step) and the cart's position at each sample."""
     V_plan = voltage_profile(shape, duration, seed)
     n = V_plan.size
     states = np.zeros((n + 1, 4))
@@ -114,8 +134,7 @@ def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 
         V[i : i + block] = np.clip(V_plan[i : i + block] - 20.0 * x * (abs(x) > cart_hold * 0.5), -params.V_max, params.V_max)
         part = PlantModel().simulate(params, V[i : i + block], STEP, states[i], t0=i * STEP)
         states[i : i + part.shape[0]] = part
-    t = np.arange(n + 1) * STEP
-    return _measured(t, np.append(V, 0.0), states[:, 0], params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")
+    return _frozen(np.append(V, 0.0), states[:, 0].copy())
 
 
 def closed_loop_params(rig: PlantParameters = TRUE) -> PlantParameters:
@@ -129,25 +148,38 @@ def closed_loop_log(rig: PlantParameters = TRUE, duration: float = 8.0, *, noise
 
     The angle and position are quantized as the encoders give them; the voltage is the applied one.
     """
+    t, V, x, alpha = _closed_loop_run(rig, float(duration))
+    return _measured(t.copy(), V, x, closed_loop_params(rig).q_x, noise, voltage_noise, seed, "synthetic closed loop, long pendulum",
+                     alpha=alpha.copy())
+
+
+@lru_cache(maxsize=RUNS_CACHED)
+def _closed_loop_run(rig: PlantParameters, duration: float) -> tuple[np.ndarray, ...]:
+    """:func:`closed_loop_log`'s run: time, voltage, position and measured angle."""
     from pendulab.control.controller import demo_controller
     from pendulab.simulation import simulate
     from pendulab.spec import RunSpec, Timing
 
-    params = closed_loop_params(rig)
-    c = simulate(RunSpec.for_parameters(demo_controller("long"), params, timing=Timing(stop_time=duration))).columns
-    return _measured(c["t"], c["voltage"], c["x"], params.q_x, noise, voltage_noise, seed, "synthetic closed loop, long pendulum",
-                     alpha=c["alpha_measured"])
+    c = simulate(RunSpec.for_parameters(demo_controller("long"), closed_loop_params(rig), timing=Timing(stop_time=duration))).columns
+    return _frozen(*(np.array(c[k], dtype=float) for k in ("t", "voltage", "x", "alpha_measured")))
 
 
 def calibrate_ramp_log(rig: PlantParameters = TRUE, *, iterations: int = 1, noise: float = 1e-5, voltage_noise: float = 0.0,
                        seed: int = 0, x0: float = 0.05) -> RampLog:
     """The ``pendulab calibrate`` ramp test, run by the same program on the virtual rig with ``rig``."""
+    t, V, x = _calibrate_ramp_run(rig, iterations, float(x0))
+    return _measured(t.copy(), V, x, rig.q_x, noise, voltage_noise, seed, "synthetic calibrate ramp test")
+
+
+@lru_cache(maxsize=RUNS_CACHED)
+def _calibrate_ramp_run(rig: PlantParameters, iterations: int, x0: float) -> tuple[np.ndarray, ...]:
+    """:func:`calibrate_ramp_log`'s run: time, voltage and position as the ramp test logged them."""
     from pendulab.calibration.ramp import run_ramp_test
     from pendulab.calibration.rig import VirtualRig
 
     with VirtualRig(rig, x0=x0) as virtual:
         log = run_ramp_test(virtual, iterations=iterations)
-    return _measured(log.t, log.V, log.x, rig.q_x, noise, voltage_noise, seed, "synthetic calibrate ramp test")
+    return _frozen(*(np.array(a, dtype=float) for a in (log.t, log.V, log.x)))
 
 
 @dataclass(frozen=True)
