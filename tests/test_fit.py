@@ -80,3 +80,37 @@ def test_fit_errors_are_user_errors():
         fit_parameters([moving], fit=("Mp",))
     with pytest.raises(CalibrationError, match="no alpha column"):
         fit_parameters([moving], PlantParameters.preset("long"))
+
+
+def test_a_fit_of_one_parameter_runs_no_evolution_strategy(monkeypatch):
+    """CMA-ES is a search over several parameters: a fit of one (the polish's scans search it) skips every run of it, a fit
+    of two runs it. (A whole fit of one parameter would compile a replay of its own; tests/test_wheel.py fits one.)"""
+    from types import SimpleNamespace
+
+    from pendulab.calibration import _polish  # private: the stage's guard, without a replay
+    from pendulab.calibration import fit as fit_module  # private: the stage's guard, without a replay
+
+    runs = []
+    monkeypatch.setattr(_polish, "evolve", lambda *args, **kwargs: runs.append(args) or (args[2], math.inf))
+    monkeypatch.setattr(_polish, "polish", lambda *args, **kwargs: _polish.Polished(args[2], math.inf, math.inf, 0, 0))
+    polished = _polish.Polished(np.ones(2), 1.0, 1.0, 0, 0)
+    answer = fit_module._Answer(SimpleNamespace(theta=np.ones(2)), polished, [], [], rms=1.0)  # far off: every stage would run
+    for names, expected in ((("force_gain",), 0), (("Beq", "force_gain"), 1)):
+        setup = SimpleNamespace(names=names, with_pendulum=False, step=1e-5, space=None, theta0=np.ones(len(names)), progress=print)
+        monkeypatch.setattr(fit_module, "_cost_of", lambda *args: 0.0)
+        monkeypatch.setattr(fit_module, "_replay_rms", lambda *args: 2.0)
+        runs.clear()
+        assert fit_module._evolved(setup, answer, "answer") is answer
+        assert (len(runs) > 0) == bool(expected), (names, len(runs))
+
+
+def test_a_synthetic_log_made_again_is_the_same_log_and_its_own():
+    """The runs behind synthetic logs are cached: the same log to the bit, with and without voltage noise, and arrays of its own."""
+    from pendulab.calibration.synthetic import synthetic_log
+
+    first = synthetic_log("chirp", TEST_RIG, duration=2.0, voltage_noise=0.01)
+    first.x[:] = 0.0
+    first.V[:] = 0.0
+    again, clean = synthetic_log("chirp", TEST_RIG, duration=2.0, voltage_noise=0.01), synthetic_log("chirp", TEST_RIG, duration=2.0, voltage_noise=0.0)
+    assert np.ptp(again.x) > 0.01 and np.array_equal(again.x, clean.x)  # the same run; the zeros written into the first stayed there
+    assert 0.005 < np.std(again.V - clean.V) < 0.015  # the noise drawn anew on the cached voltage
