@@ -72,6 +72,81 @@ def work_unit(path: Path) -> str:
     return "realtime" if path.name in REALTIME_FILES else "ramp_test_fit" if path.name in RAMP_FIT_FILES else path.name
 
 
+#: Niceness of a test process while it runs anything but the real-time group: the rig's emulator and the host answer
+#: every millisecond and must win the CPU the moment they wake; a compile, a browser or a fit beside them at the same
+#: priority made `calibrate --port` and the USB-bridge example fail on a loaded 2-core CI machine (9 of 1000 answers
+#: late even at N = 8). Only under contention does it change anything.
+NICE_BESIDE_REALTIME = 10
+
+
+class _RealTimeFirst:
+    """The real-time group runs with the machine to itself as far as the fits go: its process holds an exclusive
+    lock from its first real-time test to its last, and each fit (the LAST units) takes the lock shared, so a fit
+    waits until the real-time group is done (on a fast machine the short files keep the other process busy until
+    then, and nothing waits). ``flock`` locks are dropped by the kernel when a process dies; a fit waits at most
+    :attr:`LONGEST_WAIT` seconds in any case."""
+
+    LONGEST_WAIT = 1200.0
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd: int | None = None
+        self.exclusive = False
+        self.niced = False
+
+    def _lock(self, mode: int) -> None:
+        import fcntl
+        import time
+
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        deadline = time.monotonic() + self.LONGEST_WAIT
+        while True:
+            try:
+                fcntl.flock(self.fd, mode | fcntl.LOCK_NB)
+                return
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    return  # go on unlocked rather than hang CI: the real-time tests' reruns still stand
+                time.sleep(0.5)
+
+    def _unlock(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # drops the flock
+            self.fd, self.exclusive = None, False
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(self, item, nextitem):  # noqa: ANN001
+        import fcntl
+
+        unit = work_unit(item.path)
+        if unit == "realtime":
+            if not self.exclusive:
+                self._lock(fcntl.LOCK_EX)
+                self.exclusive = True
+        else:
+            if not self.niced:
+                os.nice(NICE_BESIDE_REALTIME)
+                self.niced = True
+            if unit in LAST:
+                self._lock(fcntl.LOCK_SH)
+        yield
+        if unit != "realtime" or nextitem is None or work_unit(nextitem.path) != "realtime":
+            self._unlock()
+
+    def pytest_unconfigure(self, config):  # noqa: ANN001 - at the end of the run: each process removes the file
+        self._unlock()
+        self.path.unlink(missing_ok=True)
+
+
+def pytest_configure(config):  # noqa: ANN001
+    workerinput = getattr(config, "workerinput", None)
+    if workerinput is not None and sys.platform != "win32":  # only with pytest-xdist's processes; no real-time tests on Windows
+        import tempfile
+
+        lock = Path(tempfile.gettempdir()) / f"pendulab-tests-{workerinput['testrunuid']}.lock"
+        config.pluginmanager.register(_RealTimeFirst(lock), "pendulab-realtime-first")
+
+
 def pytest_collection_modifyitems(config, items):  # noqa: ANN001
     for item in items:
         if item.path.name in REALTIME_FILES:
