@@ -140,3 +140,48 @@ def test_the_replays_restarts_are_bitwise_the_same_with_any_blas_kernel():
     runs = [subprocess.run([sys.executable, "-c", RESTARTS_SCRIPT], env={**os.environ, "PYTHONPATH": path, **extra}, capture_output=True, text=True,
                            check=True, timeout=600).stdout.strip() for extra in ({}, {"OPENBLAS_CORETYPE": "Prescott"})]
     assert len(runs[0]) == 64 and runs[0] == runs[1]
+
+
+FIT_SCRIPT = """
+from pendulab.calibration.fit import fit_parameters
+from pendulab.calibration.synthetic import RIGS, synthetic_log
+from pendulab.model.parameters import PlantParameters
+log = synthetic_log("random steps", RIGS["unseen"], duration=6.0, voltage_noise=0.01)
+said = []
+result = fit_parameters([log], PlantParameters.preset("none"), on_progress=said.append)
+assert any(s.startswith("CMA-ES") for s in said), said  # the global search ran, and moved the answer
+print(repr([result.values[n] for n in result.names]), repr(result.forward_rms))
+"""
+
+
+def test_a_fit_gives_the_same_bits_with_numpys_avx512_code_switched_off():
+    """numpy's exp, log, sin and power take code of their own on a CPU with AVX-512 and the C library's elsewhere,
+    whose last bits differ (:mod:`pendulab.exact`). Through numpy, a 6 s log of random steps fitted values ~1e-8
+    apart here (an AVX-512 machine), and a 16 s log of slow ramps Beq 5.3 % low instead of 0.9 %. Switched off
+    (``NPY_DISABLE_CPU_FEATURES``), the fit must give the same bits: on a CPU without AVX-512 both runs are the same
+    by construction, and the test shows nothing there."""
+    runs = []
+    for disabled in ("", "X86_V4 AVX512_ICL AVX512_SKX AVX512F"):
+        env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled, "OMP_NUM_THREADS": "1"}
+        done = subprocess.run([sys.executable, "-c", FIT_SCRIPT], env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs.append(done.stdout.strip().splitlines()[-1])
+    assert runs[0] == runs[1], runs
+
+
+def test_the_exact_elementary_functions_are_the_c_librarys_bit_for_bit():
+    import math
+
+    import numpy as np
+
+    from pendulab import exact
+
+    x = np.random.default_rng(3).normal(0.0, 3.0, 500)
+    assert exact.exp(x).tolist() == [math.exp(v) for v in x]
+    assert exact.sin(x).tolist() == [math.sin(v) for v in x] and exact.cos(x).tolist() == [math.cos(v) for v in x]
+    positive = np.abs(x) + 1e-3
+    assert exact.log(positive).tolist() == [math.log(v) for v in positive]
+    assert exact.power(positive[:, None], np.arange(4.0)[None, :]).tolist() == [[math.pow(v, k) for k in range(4)] for v in positive]
+    # numpy's edges, where math raises
+    assert exact.exp(1000.0) == math.inf and exact.log(0.0) == -math.inf and math.isnan(exact.log(-1.0))
+    assert exact.exp(np.zeros((2, 3))).shape == (2, 3)

@@ -37,7 +37,7 @@ DIFFERENCE = 0.01
 #: Converged when no parameter moves by more than this (relative).
 STEP_TOLERANCE = 3e-4
 #: Damping factors tried at once in each iteration (times the last accepted one).
-LADDER = 10.0 ** np.arange(-2.0, 5.5, 0.5)
+LADDER = exact.power(10.0, np.arange(-2.0, 5.5, 0.5))
 #: Smallest scaled value a parameter takes in the search (its logarithm must exist).
 FLOOR = 1e-4
 
@@ -81,13 +81,13 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
 
 def levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, omega: float, max_iter: int) -> Observed:
     """At most ``max_iter`` iterations from ``theta`` on the prediction errors at bandwidth ``omega``, in log coordinates."""
-    lower = np.log(np.maximum(space.lower, FLOOR))
-    upper = np.log(np.maximum(space.upper, 2 * FLOOR))
+    lower = exact.log(np.maximum(space.lower, FLOOR))
+    upper = exact.log(np.maximum(space.upper, 2 * FLOOR))
 
     def to_theta(z: np.ndarray) -> np.ndarray:
-        return np.array([space.project(th) for th in np.exp(np.clip(np.atleast_2d(z), lower, upper))])
+        return np.array([space.project(th) for th in exact.exp(np.clip(np.atleast_2d(z), lower, upper))])
 
-    z = np.log(np.maximum(space.project(np.asarray(theta, dtype=float).copy()), FLOOR))
+    z = exact.log(np.maximum(space.project(np.asarray(theta, dtype=float).copy()), FLOOR))
     r = prediction_errors(logs, space, to_theta(z), omega)[0]
     cost, damping, it = float(np.einsum("i,i->", r, r)), 1e-2, 0
     n = len(z)

@@ -504,7 +504,7 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
         for span in scan_spans:
             if done["samples"] > work:
                 break
-            trials = along(space, scanned, j, np.exp(np.linspace(-math.log1p(span), math.log1p(span), 15)))
+            trials = along(space, scanned, j, exact.exp(np.linspace(-math.log1p(span), math.log1p(span), 15)))
             scanned = trials[int(np.argmin(cost_of(trials)))]
     if scanned is not theta and (c := float(cost_of(scanned[None])[0])) < cost:
         theta, cost = scanned, c
@@ -554,7 +554,7 @@ def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: S
 
     def trials(offsets: np.ndarray) -> np.ndarray:
         T = np.repeat(thetas, offsets.shape[1], axis=0)
-        T[np.arange(T.shape[0]), np.repeat(k, offsets.shape[1])] *= np.exp(offsets.ravel())
+        T[np.arange(T.shape[0]), np.repeat(k, offsets.shape[1])] *= exact.exp(offsets.ravel())
         return np.array([space.project(t) for t in T])
 
     T1 = trials(grid)
@@ -581,7 +581,7 @@ def walk(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float) -> t
     if "v2" not in space.names or "F2" not in space.names:
         return theta, cost
     rows = np.tile(theta, (len(WALK_OFFSETS), 1))
-    rows[:, space.names.index("v2")] *= np.exp(np.array(WALK_OFFSETS))
+    rows[:, space.names.index("v2")] *= exact.exp(np.array(WALK_OFFSETS))
     c, T = valley(logs, space, rows, ["v2"] * len(rows))
     best = int(np.argmin(c))
     return (T[best], float(c[best])) if c[best] < cost else (theta, cost)
@@ -618,18 +618,18 @@ def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, se
     state = np.random.get_state()
     try:
         options = {"popsize": EVOLVE_POPULATION, "seed": seed, "verbose": -9, "maxiter": generations, "tolx": 1e-4}
-        es = cma.CMAEvolutionStrategy(list(np.log(np.maximum(theta, 1e-12))), sigma, options)
+        es = cma.CMAEvolutionStrategy(list(exact.log(np.maximum(theta, 1e-12))), sigma, options)
         best_by_generation = []
         while not es.stop():
             U = np.round(np.array(es.ask()), 9)
-            es.tell(list(U), list(costs(logs, space, np.array([space.project(np.exp(u)) for u in U]))))
+            es.tell(list(U), list(costs(logs, space, np.array([space.project(exact.exp(u)) for u in U]))))
             best_by_generation.append(float(es.result.fbest))
             if give_up and es.countiter >= give_up[0] and es.result.fbest >= give_up[1]:
                 break
             if (es.sigma < STALL_STEP * sigma and len(best_by_generation) > STALL_GENERATIONS
                     and best_by_generation[-1] >= (1 - STALL_GAIN) * best_by_generation[-1 - STALL_GENERATIONS]):
                 break
-        best, best_cost = space.project(np.exp(np.asarray(es.result.xbest))), float(es.result.fbest)
+        best, best_cost = space.project(exact.exp(np.asarray(es.result.xbest))), float(es.result.fbest)
     finally:
         np.random.set_state(state)
     return (best, best_cost) if best_cost < cost else (theta, cost)

@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import OptimizeWarning, least_squares
 
+from pendulab import exact
 from pendulab.calibration.files import UNITS, Calibration
 from pendulab.calibration.logs import RampLog, encoder_step
 from pendulab.calibration.rig import NO_PENDULUM
@@ -223,11 +224,11 @@ def _coast_distance(tau: np.ndarray, u0: float, lam0: float, lam_s: float, lam_c
     D1 = D2 + (u2 - u1) / lam_s
     return np.where(
         tau < T2,
-        u0 / lam0 * (1 - np.exp(-lam0 * tau)),
+        u0 / lam0 * (1 - exact.exp(-lam0 * tau)),
         np.where(
             tau < T1,
-            D2 + u2 / lam_s * (1 - np.exp(-lam_s * np.clip(tau - T2, 0, None))),
-            D1 + u1 / lam_c * (1 - np.exp(-lam_c * np.clip(tau - T1, 0, None))),
+            D2 + u2 / lam_s * (1 - exact.exp(-lam_s * np.clip(tau - T2, 0, None))),
+            D1 + u1 / lam_c * (1 - exact.exp(-lam_c * np.clip(tau - T1, 0, None))),
         ),
     )
 

@@ -670,7 +670,7 @@ def _rescanned(setup: _Setup, answer: _Answer) -> _Answer:
     theta = space.project(theta)
     cost = float(_polish.costs(searched, space, theta[None])[0])
     for name, span in [rescan for rescan in RESCAN if rescan[0] in setup.names] * RESCAN_ROUNDS:
-        trials = _polish.along(space, theta, setup.names.index(name), np.exp(np.linspace(-span, span, RESCAN_POINTS)))
+        trials = _polish.along(space, theta, setup.names.index(name), exact.exp(np.linspace(-span, span, RESCAN_POINTS)))
         tried = _polish.costs(searched, space, trials)
         if tried.min() < cost:
             theta, cost = trials[int(np.argmin(tried))], float(tried.min())

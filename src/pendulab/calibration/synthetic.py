@@ -20,6 +20,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from pendulab import exact
 from pendulab.calibration.logs import RampLog
 from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import PlantModel
@@ -84,7 +85,7 @@ def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
         return levels[np.clip(np.searchsorted(edges, t), 0, levels.size - 1)]
     if shape == "chirp":
         f = 0.3 + (3.0 - 0.3) * t / duration
-        return 3.0 * np.sin(2 * np.pi * np.cumsum(f) * STEP) + 0.4 * np.sin(2 * np.pi * 0.1 * t)
+        return 3.0 * exact.sin(2 * np.pi * np.cumsum(f) * STEP) + 0.4 * exact.sin(2 * np.pi * 0.1 * t)  # the same log on any CPU (pendulab.exact)
     raise ValueError(f"unknown open-loop shape {shape!r}; choose among ramps with holds, ramps with rests, triangle, random steps, chirp")
 
 
