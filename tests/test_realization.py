@@ -185,3 +185,33 @@ def test_discretize_errors():
     with pytest.raises(ControllerError, match="cannot discretize"):
         discretize([1, 2, 3])
     assert discretize(c, method="bilinear").method == "tustin"
+
+
+REALIZATION_SCRIPT = """
+import hashlib
+import numpy as np
+from pendulab.control.controller import demo_controller
+from pendulab.control.realization import continuous_realization
+for kind in ("long", "short"):
+    matrices = continuous_realization(demo_controller(kind))
+    print(kind, hashlib.sha256(b"".join(np.ascontiguousarray(m, dtype=float).tobytes() for m in matrices)).hexdigest())
+"""
+
+
+def test_the_realization_has_the_same_bits_with_numpys_avx512_code_switched_off():
+    """numpy's log and exp of a float take code of their own on an AVX-512 CPU: the sections' gains (log, exp) and so
+    the controller's coefficients differed in their last bits from an AVX2 machine's, and a closed loop's run with them
+    from its first disturbance on (the fit's synthetic closed-loop logs: a corpus case replayed at 3.35 steps here,
+    1.19 with numpy's AVX-512 code off). They go through the C library (pendulab.exact): the same bits either way. On a
+    CPU without AVX-512 both runs are the same by construction."""
+    import os
+    import subprocess
+    import sys
+
+    runs = []
+    for disabled in ("", "X86_V4 AVX512_ICL AVX512_SKX AVX512F"):
+        done = subprocess.run([sys.executable, "-c", REALIZATION_SCRIPT], env={**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled},
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs.append(done.stdout)
+    assert runs[0] == runs[1] and runs[0].count("\n") == 2, runs
