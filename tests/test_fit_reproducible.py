@@ -184,4 +184,5 @@ def test_the_exact_elementary_functions_are_the_c_librarys_bit_for_bit():
     assert exact.power(positive[:, None], np.arange(4.0)[None, :]).tolist() == [[math.pow(v, k) for k in range(4)] for v in positive]
     # numpy's edges, where math raises
     assert exact.exp(1000.0) == math.inf and exact.log(0.0) == -math.inf and math.isnan(exact.log(-1.0))
+    assert exact.exp(709.5) == math.exp(709.5) < math.inf and math.isnan(exact.exp(math.nan))  # finite up to ~709.78
     assert exact.exp(np.zeros((2, 3))).shape == (2, 3)

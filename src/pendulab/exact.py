@@ -31,7 +31,10 @@ import numpy as np
 
 
 def _exp(x: float) -> float:
-    return math.exp(x) if x < 709.0 else math.inf if x == x else math.nan
+    try:
+        return math.exp(x)
+    except OverflowError:  # numpy gives inf
+        return math.inf
 
 
 def _log(x: float) -> float:
