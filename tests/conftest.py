@@ -133,18 +133,33 @@ class _RealTimeFirst:
         if unit != "realtime" or nextitem is None or work_unit(nextitem.path) != "realtime":
             self._unlock()
 
-    def pytest_unconfigure(self, config):  # noqa: ANN001 - at the end of the run: each process removes the file
+    def pytest_unconfigure(self, config):  # noqa: ANN001 - the file stays: the controller, which named it, removes it
         self._unlock()
-        self.path.unlink(missing_ok=True)
+
+
+#: The lock file of :class:`_RealTimeFirst`: named by pytest-xdist's controller, which hands it to its processes
+#: (:func:`pytest_configure_node`) and removes it when the whole run ends, not when the first of them ends.
+_LOCK_FILE = pytest.StashKey[Path]()
 
 
 def pytest_configure(config):  # noqa: ANN001
     workerinput = getattr(config, "workerinput", None)
-    if workerinput is not None and sys.platform != "win32":  # only with pytest-xdist's processes; no real-time tests on Windows
+    if workerinput is None:
         import tempfile
 
-        lock = Path(tempfile.gettempdir()) / f"pendulab-tests-{workerinput['testrunuid']}.lock"
-        config.pluginmanager.register(_RealTimeFirst(lock), "pendulab-realtime-first")
+        config.stash[_LOCK_FILE] = Path(tempfile.gettempdir()) / f"pendulab-tests-{os.getpid()}.lock"
+    elif "pendulab_lock" in workerinput and sys.platform != "win32":  # pytest-xdist's processes; no real-time tests on Windows
+        config.pluginmanager.register(_RealTimeFirst(Path(workerinput["pendulab_lock"])), "pendulab-realtime-first")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):  # noqa: ANN001 - pytest-xdist's controller, for each process it starts
+    node.workerinput["pendulab_lock"] = str(node.config.stash[_LOCK_FILE])
+
+
+def pytest_unconfigure(config):  # noqa: ANN001
+    if getattr(config, "workerinput", None) is None and _LOCK_FILE in config.stash:
+        config.stash[_LOCK_FILE].unlink(missing_ok=True)
 
 
 def pytest_collection_modifyitems(config, items):  # noqa: ANN001

@@ -186,3 +186,6 @@ def test_the_exact_elementary_functions_are_the_c_librarys_bit_for_bit():
     assert exact.exp(1000.0) == math.inf and exact.log(0.0) == -math.inf and math.isnan(exact.log(-1.0))
     assert exact.exp(709.5) == math.exp(709.5) < math.inf and math.isnan(exact.exp(math.nan))  # finite up to ~709.78
     assert exact.exp(np.zeros((2, 3))).shape == (2, 3)
+    # a scalar gives a float (callers need no float() around them), an array of one element an array
+    assert type(exact.log(2.0)) is float and type(exact.power(2.0, 0.5)) is float and type(exact.sin(np.float64(1.0))) is float
+    assert isinstance(exact.exp(np.array([1.0])), np.ndarray) and isinstance(exact.power(np.array([2.0]), 2.0), np.ndarray)

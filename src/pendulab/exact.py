@@ -46,29 +46,36 @@ _SIN, _COS = np.vectorize(math.sin, otypes=[float]), np.vectorize(math.cos, otyp
 _POWER = np.vectorize(math.pow, otypes=[float])
 
 
-def exp(x: np.ndarray | float) -> np.ndarray:
-    """``numpy.exp``, elementwise through the C library (see the module docstring); +inf where it overflows."""
-    return _EXP(np.asarray(x, dtype=float))
+def _each(f: np.vectorize, *args: np.ndarray | float) -> np.ndarray | float:
+    """``f`` on every element of ``args`` (broadcast): an array, or a float where every argument is a scalar."""
+    out = f(*(np.asarray(a, dtype=float) for a in args))
+    return float(out) if out.ndim == 0 else out
 
 
-def log(x: np.ndarray | float) -> np.ndarray:
+def exp(x: np.ndarray | float) -> np.ndarray | float:
+    """``numpy.exp``, elementwise through the C library (see the module docstring); +inf where it overflows.
+    A float for a scalar (here and in :func:`log`, :func:`sin`, :func:`cos`, :func:`power`), else an array."""
+    return _each(_EXP, x)
+
+
+def log(x: np.ndarray | float) -> np.ndarray | float:
     """``numpy.log``, elementwise through the C library; -inf at 0, nan below."""
-    return _LOG(np.asarray(x, dtype=float))
+    return _each(_LOG, x)
 
 
-def sin(x: np.ndarray | float) -> np.ndarray:
+def sin(x: np.ndarray | float) -> np.ndarray | float:
     """``numpy.sin``, elementwise through the C library."""
-    return _SIN(np.asarray(x, dtype=float))
+    return _each(_SIN, x)
 
 
-def cos(x: np.ndarray | float) -> np.ndarray:
+def cos(x: np.ndarray | float) -> np.ndarray | float:
     """``numpy.cos``, elementwise through the C library."""
-    return _COS(np.asarray(x, dtype=float))
+    return _each(_COS, x)
 
 
-def power(x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
+def power(x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray | float:
     """``x ** y`` (broadcast), elementwise through the C library's ``pow``."""
-    return _POWER(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    return _each(_POWER, x, y)
 
 
 def dot(A: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -211,28 +211,24 @@ def _section_blocks(controller: Controller) -> list[tuple[np.ndarray, ...]]:
     secs = sections(list(zeros), list(poles))
     if not secs:
         return []
+    # Logs and exps through the C library (pendulab.exact): numpy's take other code on an AVX-512 CPU, and the sections' gains,
+    # hence the controller's coefficients and a closed loop's run from its first disturbance on, differed in their last bits.
     log_norms = []
     for sz, sp in secs:
         # Gain at the natural frequency w as if the roots lay at -|r|: never 0 or infinite, even for
         # roots on the imaginary axis, and close to the true gain for ordinary sections.
-        log_w = float(np.mean([_log(abs(p)) for p in sp]))
-        size = sum(_log_hypot(log_w, _log(abs(z))) for z in sz) - sum(_log_hypot(log_w, _log(abs(p))) for p in sp)
+        log_w = float(np.mean([exact.log(abs(p)) for p in sp]))
+        size = sum(_log_hypot(log_w, exact.log(abs(z))) for z in sz) - sum(_log_hypot(log_w, exact.log(abs(p))) for p in sp)
         log_norms.append(size)
-    share = (_log(abs(gain)) - sum(log_norms)) / len(secs)
+    share = (exact.log(abs(gain)) - sum(log_norms)) / len(secs)
     blocks = []
     for i, ((sz, sp), log_norm) in enumerate(zip(secs, log_norms)):
         A, B, C, D = _section_ss(sz, sp)
-        f = float(exact.exp(share + log_norm))  # this section's factor: its own normalization times the shared gain
+        f = exact.exp(share + log_norm)  # this section's factor: its own normalization times the shared gain
         f = f if i or gain > 0 else -f  # the sign of the gain goes to the first section
         root = np.sqrt(abs(f))
         blocks.append((A, B * root, C * (f / root), D * f))
     return blocks
-
-
-def _log(value: float) -> float:
-    """``log`` through the C library (:mod:`pendulab.exact`): numpy's takes other code on an AVX-512 CPU, and the sections'
-    gains, hence the controller's coefficients and a closed loop's run from its first disturbance on, differed in their last bits."""
-    return float(exact.log(value))
 
 
 def _log_hypot(log_a: float, log_b: float) -> float:
