@@ -62,3 +62,32 @@ def test_the_same_bits_on_any_blas_kernel():
         return subprocess.run([sys.executable, "-c", _BITS], env=env, capture_output=True, text=True, check=True).stdout.strip()
 
     assert bits(None) == bits("Prescott")
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 8])
+def test_eigh_decomposes_like_lapack_with_fixed_signs(n):
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        M = rng.normal(size=(n, n))
+        A = M @ M.T + np.diag(rng.uniform(0.0, 1.0, n)) * 10.0 ** rng.uniform(-6, 0)
+        values, vectors = exact.eigh(A)
+        scale = float(np.max(np.abs(A)))
+        assert np.allclose(values, np.linalg.eigvalsh(A), rtol=1e-11, atol=1e-12 * scale)
+        assert np.all(np.diff(values) >= 0)
+        assert np.allclose(vectors @ np.diag(values) @ vectors.T, A, atol=1e-12 * scale)
+        assert np.allclose(vectors.T @ vectors, np.eye(n), atol=1e-12)
+        largest = np.abs(vectors).argmax(axis=0)
+        assert np.all(vectors[largest, np.arange(n)] > 0)  # each column's sign fixed: its largest component positive
+
+
+def test_eigh_of_a_diagonal_and_a_degenerate_matrix():
+    values, vectors = exact.eigh(np.diag([3.0, 1.0, 2.0]))
+    assert values.tolist() == [1.0, 2.0, 3.0] and vectors.tolist() == [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    values, vectors = exact.eigh(np.eye(4))
+    assert values.tolist() == [1.0] * 4 and vectors.tolist() == np.eye(4).tolist()
+
+
+def test_significant_rounds_to_decimal_digits():
+    assert exact.significant(2.8180000000000003, 7) == 2.818 and isinstance(exact.significant(1.0, 3), float)
+    assert exact.significant(np.array([0.0049999999999999, -123456789.0, 0.0]), 4).tolist() == [0.005, -123500000.0, 0.0]
+    assert exact.significant(1.23456749, 7) == 1.234567 and exact.significant(1.23456751, 7) == 1.234568

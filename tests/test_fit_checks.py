@@ -14,9 +14,10 @@ import pytest
 import scipy.io
 from fit_helpers import simulate
 
+from pendulab import exact
 from pendulab.calibration import fit as fit_module
 from pendulab.calibration.files import load_calibration, save_calibration
-from pendulab.calibration.fit import DEFAULT_FIT, fit_parameters, ramp_start
+from pendulab.calibration.fit import DEFAULT_FIT, START_DIGITS, fit_parameters, ramp_start
 from pendulab.calibration.logs import RampLog, read_log, write_log
 from pendulab.calibration.synthetic import TEST_RIG, synthetic_log
 from pendulab.cli.main import main
@@ -105,7 +106,7 @@ def test_forward_check_is_reported_stored_and_matches_an_independent_replay(ramp
     for name, status in meta["determination"].items():
         assert (meta["uncertainty"][name] is None) == (status != "determined")
     start, _ = ramp_start([log], PlantParameters.preset("none"))
-    assert meta["initial"]["F1"] == pytest.approx(start.F1, rel=1e-9)  # the CSV keeps 15 digits
+    assert meta["initial"]["F1"] == pytest.approx(exact.significant(start.F1, START_DIGITS), rel=1e-9)  # the CSV keeps 15 digits
 
 
 def test_a_fit_that_cannot_reproduce_the_log_exits_3_and_writes_no_calibration(capsys, ramp_log, tmp_path):

@@ -59,3 +59,42 @@ def test_a_parameter_whose_range_reaches_zero_is_bounded_not_determined():
     low, high = prof.allowed[j]
     assert prof.status[j] == _polish.BOUNDED and low == 0.0 and rig.F1 / space.scales[j] < high
     assert prof.status[space.names.index("Beq")] == _polish.DETERMINED  # what the steps do show stays determined
+
+
+def test_another_minimum_the_search_found_bounds_or_widens_what_it_moves(monkeypatch):
+    """A minimum that replays the logs nearly as well as the answer (within RANGE_COST_RATIO of its cost) is one the logs do not
+    tell from it: a determined parameter it moves by more than RIVAL_APART is only bounded, its range holding both; one it moves
+    by less is uncertain by at least half the move. One that replays worse changes nothing."""
+    from pendulab.calibration import fit as fit_module
+    from pendulab.calibration.fit import RIVAL_APART, fit_parameters
+    from pendulab.calibration.synthetic import RIGS
+    from pendulab.model.parameters import PlantParameters
+
+    log = synthetic_log("random steps", RIGS["unseen"], duration=6.0, voltage_noise=0.0)
+    lab = PlantParameters.preset("none")
+    plain = fit_parameters([log], lab)
+    assert plain.determination["F2"] == plain.determination["Beq"] == _polish.DETERMINED
+    beq_move = 4 * plain.uncertainty["Beq"] / plain.values["Beq"]
+    assert beq_move < RIVAL_APART
+    result = fit_module._result
+
+    def injected(setup, answer, start_values, t_start):
+        near, far = answer.polished.theta.copy(), answer.polished.theta.copy()
+        near[setup.names.index("F2")] *= 1.3
+        near[setup.names.index("Beq")] *= 1 + beq_move
+        far[setup.names.index("force_gain")] *= 1.5  # replays 2.5 times worse: says nothing
+        setup.rivals += [(near, 1.05 * answer.polished.cost), (far, 2.5 * answer.polished.cost)]
+        return result(setup, answer, start_values, t_start)
+
+    monkeypatch.setattr(fit_module, "_result", injected)
+    rivalled = fit_parameters([log], lab)
+    assert rivalled.values == plain.values  # the answer stays; what is said of it changes
+    assert rivalled.determination["F2"] == _polish.BOUNDED
+    low, high = rivalled.allowed["F2"]
+    assert low <= plain.values["F2"] and high >= 1.29 * plain.values["F2"]
+    assert rivalled.determination["Beq"] == _polish.DETERMINED
+    assert rivalled.uncertainty["Beq"] == pytest.approx(0.5 * beq_move * plain.values["Beq"], rel=1e-3)
+    assert "another minimum" in rivalled.uncertainty_method
+    assert rivalled.determination["force_gain"] == plain.determination["force_gain"]
+    assert rivalled.uncertainty["force_gain"] == plain.uncertainty["force_gain"]
+    assert rivalled.allowed["force_gain"] == plain.allowed["force_gain"]

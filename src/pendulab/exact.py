@@ -1,12 +1,13 @@
-"""Small dense linear algebra, the Savitzky-Golay filter and the elementary functions, with the same bits on any x86-64 machine.
+"""Small dense linear algebra, the Savitzky-Golay filter, the elementary functions and rounding, with the same bits on any x86-64 machine.
 
 numpy's ``linalg`` and ``@``, and scipy's ``savgol_filter`` (its coefficients come from a least-squares
 solve), call OpenBLAS, which picks its kernels by CPU: a least-squares solve, a matrix product and a filter's
 coefficients differ in their last bits between its AVX2 kernels and its SSE3 ones (``OPENBLAS_CORETYPE=Prescott``).
 A 4x4 ``numpy.linalg.solve`` gave the same bits under both, but LAPACK calls BLAS too, so it goes through here. The fit's start
-(smoothed states, the logs' own estimate), its restarts' states and its uncertainties use these instead:
-every product is an elementwise ufunc (IEEE, no fused multiply-add) and every sum runs in an order the
-code fixes. Meant for the few-column systems the fit solves, not for speed.
+(smoothed states, the logs' own estimate), its restarts' states, its uncertainties and CMA-ES's eigen-decomposition
+(:func:`eigh`) use these instead: every product is an elementwise ufunc (IEEE, no fused multiply-add) and every sum
+runs in an order the code fixes. Meant for the few-column systems the fit solves, not for speed. What still comes through
+OpenBLAS (scipy's least squares, pycma's products) is rounded (:func:`significant`) where a search goes on from it.
 
 numpy's own ``exp``, ``log``, ``sin``, ``cos`` and ``power`` of float64 arrays take code of their own on a CPU with
 AVX-512 (``numpy.show_runtime()``: ``X86_V4``, ``AVX512_SKX``) and the C library's elsewhere; the last bits differ, and
@@ -133,6 +134,78 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     x = np.zeros((A.shape[1], *b.shape[1:]))
     x[used] = _back_substitute(R[:n], y[:n])
     return x
+
+
+def significant(x: np.ndarray | float, digits: int) -> np.ndarray | float:
+    """``x`` rounded to ``digits`` significant decimal digits (Python's correctly rounded formatting).
+
+    A result that came through LAPACK or an iterative solver may differ in its last bits, or further, between CPUs;
+    where it starts a search that amplifies such differences, it is rounded first, so that only a value within that
+    much of a rounding boundary can still tell two machines apart.
+
+    Examples
+    --------
+    >>> significant(np.array([2.8180000000000003, 0.0049999999999999]), 7).tolist()
+    [2.818, 0.005]
+    """
+    return _each(np.vectorize(lambda v: float(f"{v:.{digits - 1}e}"), otypes=[float]), x)
+
+
+#: Jacobi sweeps of :func:`eigh` at most (a 7x7 matrix takes 6 to 8).
+JACOBI_SWEEPS = 60
+
+
+def eigh(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (ascending) and eigenvectors (columns) of the symmetric ``A``, by cyclic Jacobi rotations in Python floats.
+
+    Unlike LAPACK's, each eigenvector's sign is fixed (its largest component, the first of equals, positive) and the
+    bits do not depend on the CPU's kernels: CMA-ES samples along these vectors, and a column's sign flipped by
+    another kernel sends it elsewhere. For small matrices (CMA-ES's covariance), not for speed.
+
+    Examples
+    --------
+    >>> values, vectors = eigh(np.array([[2.0, 1.0], [1.0, 2.0]]))
+    >>> values.round(12).tolist(), (vectors * 2 ** 0.5).round(12).tolist()
+    ([1.0, 3.0], [[1.0, 1.0], [-1.0, 1.0]])
+    """
+    a = [[float(v) for v in row] for row in np.asarray(A, dtype=float)]
+    n = len(a)
+    v = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
+    for _ in range(JACOBI_SWEEPS):
+        off = 0.0
+        for p in range(n):
+            for q in range(p + 1, n):
+                off += a[p][q] * a[p][q]
+        diagonal = 0.0
+        for p in range(n):
+            diagonal += a[p][p] * a[p][p]
+        if off <= 1e-36 * diagonal or off == 0.0:
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                if a[p][q] == 0.0:
+                    continue
+                tau = (a[q][q] - a[p][p]) / (2.0 * a[p][q])  # the rotation that zeroes a[p][q] (Golub & Van Loan, sym.schur2)
+                t = 1.0 / (tau + math.sqrt(1.0 + tau * tau)) if tau >= 0 else -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+                c = 1.0 / math.sqrt(1.0 + t * t)
+                s = t * c
+                for k in range(n):  # columns p and q: A J
+                    akp, akq = a[k][p], a[k][q]
+                    a[k][p], a[k][q] = c * akp - s * akq, s * akp + c * akq
+                for k in range(n):  # rows p and q: J^T (A J)
+                    apk, aqk = a[p][k], a[q][k]
+                    a[p][k], a[q][k] = c * apk - s * aqk, s * apk + c * aqk
+                for k in range(n):
+                    vkp, vkq = v[k][p], v[k][q]
+                    v[k][p], v[k][q] = c * vkp - s * vkq, s * vkp + c * vkq
+    order = sorted(range(n), key=lambda j: (a[j][j], j))
+    values = np.array([a[j][j] for j in order])
+    vectors = np.array([[v[i][j] for j in order] for i in range(n)])
+    for j in range(n):
+        largest = max(range(n), key=lambda i: (abs(vectors[i, j]), -i))
+        if vectors[largest, j] < 0:
+            vectors[:, j] = -vectors[:, j]
+    return values, vectors
 
 
 def savgol(y: np.ndarray, window: int, order: int = 3, deriv: int = 0, delta: float = 1.0) -> np.ndarray:

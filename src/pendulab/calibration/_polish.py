@@ -258,6 +258,10 @@ def trend_filter(y: np.ndarray, weight: float, tol: float = 1e-4, max_iter: int 
     return y - DT(z)
 
 
+#: The denoised voltage is rounded to this many decimals (V): its banded solves (LAPACK) differ in their last bits between CPUs.
+DENOISED_DECIMALS = 7
+
+
 def denoised_voltage(V: np.ndarray) -> np.ndarray:
     """The applied voltage estimated from a noisy logged one, keeping its steps and its ramps.
 
@@ -273,7 +277,7 @@ def denoised_voltage(V: np.ndarray) -> np.ndarray:
     out = V.copy()
     for a, b in zip(cuts[:-1], cuts[1:]):
         out[a:b] = trend_filter(V[a:b], TREND_WEIGHT * sigma) if b - a >= 5 else np.median(V[a:b])
-    return out
+    return np.round(out, DENOISED_DECIMALS)
 
 
 def denoised(a: Anchors) -> Anchors:
@@ -599,6 +603,40 @@ EVOLVE_POPULATION = 16
 STALL_GENERATIONS = 25
 STALL_GAIN = 1e-3
 STALL_STEP = 1 / 30
+#: :func:`evolve`'s samples are rounded to this many decimals (log units) before they are replayed and told: numpy's products
+#: (OpenBLAS, its kernels chosen by CPU) move them in their last bits, and a sample rounded the other way sends the search
+#: elsewhere. A run draws some 22400 coordinates; with its state rounded too (:func:`_canonical_state`) they differ by some 1e-16,
+#: and at 1e-9 about one run in a hundred would meet a boundary. Not coarser: late in a run the covariance's condition reaches
+#: 1e7 and its narrow axes' steps 1e-6 (at 1e-6 the development corpus met the bar on 17 of 22 cases instead of 22).
+SAMPLE_DECIMALS = 9
+#: The covariance is rounded to this share of ``sqrt(C_ii C_jj)`` before its eigen-decomposition (:func:`_covariance_eigh`).
+COVARIANCE_GRID = 2.0**-30
+
+
+def _covariance_eigh(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CMA-ES's eigen-decomposition (its ``CMA_eigenmethod``): ``C``, its last bits rounded away, by :func:`exact.eigh`,
+    whose eigenvectors' signs and bits are the same on any CPU (LAPACK's are not: a flipped column is another sample)."""
+    return exact.eigh(_rounded_covariance(C))
+
+
+def _rounded_covariance(C: np.ndarray) -> np.ndarray:
+    """``C`` (symmetric) on a grid of a power of two near ``sqrt(C_ii C_jj) * COVARIANCE_GRID``: dividing by it and multiplying
+    back add no bits of their own."""
+    C = np.asarray(C, dtype=float)
+    grid = np.ldexp(1.0, np.frexp(np.sqrt(np.outer(np.diag(C), np.diag(C))) * COVARIANCE_GRID)[1])
+    rounded = np.round(C / grid) * grid
+    return np.triu(rounded) + np.triu(rounded, 1).T
+
+
+def _canonical_state(es) -> None:
+    """CMA-ES's state rounded after each generation (pycma's products go through OpenBLAS): its mean (9 decimals, log units),
+    step (9 digits), evolution paths (``ps`` 6 decimals, ``pc`` 7 digits) and covariance (:func:`_rounded_covariance`). Unrounded,
+    their last bits grew with the covariance's condition (to 1e-11 in ``ps`` at 6e6) until a generation sampled elsewhere."""
+    es.mean = np.round(np.asarray(es.mean, dtype=float), 9)
+    es.sigma = exact.significant(float(es.sigma), 9)
+    es.adapt_sigma.ps = np.round(np.asarray(es.adapt_sigma.ps, dtype=float), 6)
+    es.pc = exact.significant(np.asarray(es.pc, dtype=float), 7)
+    es.sm.C = _rounded_covariance(es.sm.C)
 
 
 def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, seed: int = 19, sigma: float = EVOLVE_SIGMA,
@@ -609,20 +647,23 @@ def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, se
 
     Derivative-free with a population per step, it steps over the replay cost's small jumps and learns the joint moves the
     pattern search's fixed directions miss; with a step of a factor e, from the start, it is the fit's global search.
-    Seeded, its samples rounded (1e-9 in log units) so that the linear algebra's last bits, which differ between CPUs, do
-    not change what is replayed; numpy's global random state is restored. Returns the best point and its cost (``theta``
-    and ``cost`` if none is lower).
+    Seeded, its samples rounded (:data:`SAMPLE_DECIMALS`), its state rounded after each generation (:func:`_canonical_state`)
+    and its covariance decomposed by :func:`_covariance_eigh`, so that the linear algebra's last bits, which differ between
+    CPUs, do not change what is replayed; numpy's global random state is restored. Returns the best point and its cost
+    (``theta`` and ``cost`` if none is lower).
     """
     import cma
 
     state = np.random.get_state()
     try:
-        options = {"popsize": EVOLVE_POPULATION, "seed": seed, "verbose": -9, "maxiter": generations, "tolx": 1e-4}
+        options = {"popsize": EVOLVE_POPULATION, "seed": seed, "verbose": -9, "maxiter": generations, "tolx": 1e-4,
+                   "CMA_eigenmethod": _covariance_eigh}
         es = cma.CMAEvolutionStrategy(list(exact.log(np.maximum(theta, 1e-12))), sigma, options)
         best_by_generation = []
         while not es.stop():
-            U = np.round(np.array(es.ask()), 9)
+            U = np.round(np.array(es.ask()), SAMPLE_DECIMALS)
             es.tell(list(U), list(costs(logs, space, np.array([space.project(exact.exp(u)) for u in U]))))
+            _canonical_state(es)
             best_by_generation.append(float(es.result.fbest))
             if give_up and es.countiter >= give_up[0] and es.result.fbest >= give_up[1]:
                 break
