@@ -75,10 +75,11 @@ def twin_run(tmp_path_factory):
         ensure_fmu(name)
     build_firmware(), build_twin()
     base = tmp_path_factory.mktemp("fwlab")
-    result = _session(base / "demo")
-    if result[1] != 0 and any(why in result[2] + result[3] for why in HOST_TOO_SLOW):
-        print("the host was too slow for the link (machine load); one more session")
-        result = _session(base / "demo2")
+    for attempt in range(3):  # the module's fixture: pytest's reruns of a test would look at the same session again
+        result = _session(base / f"demo{attempt}")
+        if result[1] == 0 or not any(why in result[2] + result[3] for why in HOST_TOO_SLOW):
+            break
+        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}")
     return result
 
 
