@@ -89,11 +89,11 @@ NICE_BESIDE_REALTIME = 10
 
 
 class _RealTimeFirst:
-    """The real-time group runs with the machine to itself as far as the fits go: its process holds an exclusive
-    lock from its first real-time test to its last, and each fit (the LAST units) takes the lock shared, so a fit
-    waits until the real-time group is done (on a fast machine the short files keep the other process busy until
-    then, and nothing waits). ``flock`` locks are dropped by the kernel when a process dies; a fit waits at most
-    :attr:`LONGEST_WAIT` seconds in any case."""
+    """The real-time group runs with the machine to itself as far as the heavy files go: its process holds an exclusive
+    lock from its first real-time test to its last, and each LAST unit (the fits, and the files that keep the kernel
+    busy) takes the lock shared, so it waits until the real-time group is done (on a fast machine the short files keep
+    the other process busy until then, and nothing waits). ``flock`` locks are dropped by the kernel when a process dies;
+    a unit waits at most :attr:`LONGEST_WAIT` seconds in any case."""
 
     LONGEST_WAIT = 1200.0
 

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from hil_helpers import emulator, lab
+from hil_helpers import emulator, lab, until_the_link_holds
 
 from pendulab.hil.session import DRIVE_TIME, EncoderWatch
 
@@ -80,16 +80,17 @@ def _rig_time(lines: list[str], fragment: str) -> float:
 @pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")
 @pytest.mark.parametrize("fault, which", [("--frozen-encoder", "pendulum"), ("--dead-encoder", "cart")])
 def test_lab_stops_the_motor_on_an_encoder_fault_from_the_emulator(tmp_path, fault, which):
-    for attempt in range(2):
+    def session(attempt: int):
         with emulator("--raise-after", "0.3", fault, f"{which},2") as emu:
             result = lab("--port", emu.port, "--demo", "--delay", "3", "--stop-time", "8", "--out", str(tmp_path / f"run{attempt}"),
                          stdin="s\n", timeout=60)
             emu.wait_for("motor off", timeout=5)
-            lines = list(emu.lines)
-        if "encoder gave no count" in result.stdout:
-            break
-        # The real-time link lost on this shared host (watchdog, a pty write timeout) before the fault: again.
-        print(f"the session ended before the encoder fault; again:\n{result.stdout[-300:]}")
+            return result, list(emu.lines)
+
+    # A session that ended before the fault lost the real-time link on this shared host (watchdog, a pty write timeout): again.
+    result, lines = until_the_link_holds(
+        session, lambda run: None if "encoder gave no count" in run[0].stdout else f"ended before the encoder fault:\n{run[0].stdout[-300:]}",
+        attempts=2)
     assert f"the {which} encoder gave no count" in result.stdout, result.stdout + result.stderr
     detected = _rig_time(lines, "motor off") - _rig_time(lines, f"{which} encoder")
     print(f"{fault} {which}: motor off {detected * 1e3:.0f} ms after the fault")

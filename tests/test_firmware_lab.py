@@ -12,7 +12,18 @@ import time
 import numpy as np
 import pytest
 from firmware_helpers import twin, twin_available
-from hil_helpers import SEESAW_TAP, angle_error_against_simulate, check_seesaw_held, emulator, lab, lab_process, read_log
+from hil_helpers import (
+    SEESAW_TAP,
+    angle_error_against_simulate,
+    check_seesaw_held,
+    emulator,
+    ended_by,
+    lab,
+    lab_process,
+    last_line,
+    read_log,
+    until_the_link_holds,
+)
 
 pytestmark = [
     pytest.mark.skipif(sys.platform == "win32", reason="simavr and pseudo-terminals are POSIX"),
@@ -75,12 +86,12 @@ def twin_run(tmp_path_factory):
         ensure_fmu(name)
     build_firmware(), build_twin()
     base = tmp_path_factory.mktemp("fwlab")
-    for attempt in range(3):  # the module's fixture: pytest's reruns of a test would look at the same session again
-        result = _session(base / f"demo{attempt}")
-        if result[1] == 0 or not any(why in result[2] + result[3] for why in HOST_TOO_SLOW):
-            break
-        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}")
-    return result
+
+    def lost(run) -> str | None:
+        _, status, stdout, stderr, _ = run
+        return last_line(stdout) if status != 0 and ended_by(stdout + stderr, HOST_TOO_SLOW) else None
+
+    return until_the_link_holds(lambda attempt: _session(base / f"demo{attempt}"), lost)
 
 
 def test_demo_controller_balances_through_lab_twin_and_firmware(twin_run):
@@ -185,16 +196,21 @@ def test_lab_swings_up_the_twins_hanging_pendulum_and_holds_it(tmp_path):
     for name in ("Plant", "Controller", "Supervisor"):
         ensure_fmu(name)
     build_firmware(), build_twin()
-    for attempt in range(2):
+
+    def session(attempt: int):
         out = tmp_path / f"swing{attempt}"
         with emulator("--firmware") as emu:
             proc = lab_process("--port", emu.port, "--demo", "--swing-up", "--recentre", "--delay", "4", "--stop-time", "16",
                                "--out", str(out))
             stdout, stderr = proc.communicate("s\n", timeout=90)
-        if not any(why in stdout + stderr for why in HOST_TOO_SLOW):
-            break
-        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}")
-    assert proc.returncode == 0, stdout + stderr
+        return out, proc.returncode, stdout, stderr
+
+    def lost(run) -> str | None:
+        _, _, stdout, stderr = run
+        return last_line(stdout) if ended_by(stdout + stderr, HOST_TOO_SLOW) else None
+
+    out, status, stdout, stderr = until_the_link_holds(session, lost, attempts=2)
+    assert status == 0, stdout + stderr
     metrics = json.loads((out / "metrics.json").read_text())
     log = read_log(out / "rig_log.csv")
     catch = metrics["catch_time_s"]
@@ -225,16 +241,19 @@ def seesaw_twin_run(tmp_path_factory):
     for name in ("Seesaw", "Controller", "Supervisor"):
         ensure_fmu(name)
     build_firmware(), build_twin()
-    for attempt in range(3):
+
+    def session(attempt: int):
         out = tmp_path_factory.mktemp("fwseesaw") / "run"
         with emulator("--firmware", "--plant", "seesaw", "--raise-after", "0", "--poke", SEESAW_TAP) as emu:
             result = lab("--port", emu.port, "--plant", "seesaw", "--demo", "--max-delay", "8", "--stop-time", str(SEESAW_STOP),
                          "--out", str(out), stdin="s\n", timeout=90)
-            text = emu.text
-        if result.returncode == 0 or not any(why in result.stdout + result.stderr for why in HOST_TOO_SLOW):
-            break
-        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}")
-    return out, result, text
+            return out, result, emu.text
+
+    def lost(run) -> str | None:
+        _, result, _ = run
+        return last_line(result.stdout) if result.returncode != 0 and ended_by(result.stdout + result.stderr, HOST_TOO_SLOW) else None
+
+    return until_the_link_holds(session, lost)
 
 
 def test_lab_holds_the_twins_seesaw_level_for_10_s(seesaw_twin_run):

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 import scipy.io
-from hil_helpers import angle_error_against_simulate, emulator, lab, lab_process, read_log
+from hil_helpers import angle_error_against_simulate, emulator, lab, lab_process, last_line, read_log, until_the_link_holds
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")
 
@@ -57,16 +57,18 @@ def demo_run(tmp_path_factory):
 
     The emulator and the lab share this machine's two cores with whatever else runs: a session on a
     loaded CI host can lose its real-time link (the lab then ends, motor off, log kept, as on a rig). That
-    is printed, and the session is run again; the test fails if the third one also ends early. (The
-    fixture is the module's, so pytest's reruns of the test would only look at the same session again:
-    the retries are here, as test_hil_seesaw's.)
+    is printed, and the session is run again; the test fails if the third one also ends early.
     """
-    for attempt in range(3):
+
+    def session(attempt: int):
         out = tmp_path_factory.mktemp("lab") / "demo"
-        status, stdout, stderr, emu_text, early = _demo_session(out)
-        if not early:
-            break
-        print(f"session {attempt + 1} ended before the end key (status {status}): {stdout.strip().splitlines()[-1:]} {stderr.strip()[-300:]}")
+        return (out, *_demo_session(out))
+
+    def lost(run) -> str | None:
+        _, status, stdout, stderr, _, early = run
+        return f"ended before the end key (status {status}): {last_line(stdout)} {stderr.strip()[-300:]}" if early else None
+
+    out, status, stdout, stderr, emu_text, _ = until_the_link_holds(session, lost)
     return out, status, stdout, stderr, emu_text
 
 

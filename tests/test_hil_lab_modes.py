@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from hil_helpers import emulator, lab, read_log
+from hil_helpers import emulator, ended_by, lab, last_line, read_log, until_the_link_holds
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")
 
@@ -21,14 +21,16 @@ HOST_TOO_SLOW = ("the link is too slow", "the host's answers stopped reaching it
 
 def _lab_once_more_if_the_host_was_too_slow(out, emulator_args, lab_args, *, retry=True):
     """One session; on a host too slow for the real-time link (printed), up to two more."""
-    for attempt in range(3):
+    def session(attempt: int):
         with emulator(*emulator_args) as emu:
             result = lab("--port", emu.port, *lab_args, "--out", str(out), "--overwrite", stdin="s\n")
-            text = emu.text
-        if not retry or not any(why in result.stdout + result.stderr for why in HOST_TOO_SLOW):
-            break
-        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}: {result.stdout.strip().splitlines()[-1:]}")
-    return result, text
+            return result, emu.text
+
+    def lost(run) -> str | None:
+        result, _ = run
+        return last_line(result.stdout) if retry and ended_by(result.stdout + result.stderr, HOST_TOO_SLOW) else None
+
+    return until_the_link_holds(session, lost)
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 import scipy.io
-from hil_helpers import SEESAW_TAP, angle_error_against_simulate, check_seesaw_held, emulator, lab
+from hil_helpers import SEESAW_TAP, angle_error_against_simulate, check_seesaw_held, emulator, ended_by, lab, last_line, until_the_link_holds
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX (Windows uses --tcp)")
 
@@ -43,14 +43,17 @@ def seesaw_run(tmp_path_factory):
     On a loaded host the link can be lost (the lab then ends, motor off, log kept, as on a rig): that is
     printed and the session is run again; the test fails if the last one also ends early.
     """
-    for attempt in range(3):
+    def session(attempt: int):
         out = tmp_path_factory.mktemp("seesaw") / "run"
-        result, emu_text = _session(out)
-        if result.returncode == 0 or not any(why in result.stdout + result.stderr for why in HOST_TOO_SLOW):
-            break
-        print(f"the host was too slow for the link (machine load), attempt {attempt + 1}: {result.stdout.strip().splitlines()[-1:]}"
-              f"{result.stderr.strip()[-200:]}")
-    return out, result, emu_text
+        return (out, *_session(out))
+
+    def lost(run) -> str | None:
+        _, result, _ = run
+        if result.returncode == 0 or not ended_by(result.stdout + result.stderr, HOST_TOO_SLOW):
+            return None
+        return f"{last_line(result.stdout)} {result.stderr.strip()[-200:]}"
+
+    return until_the_link_holds(session, lost)
 
 
 def test_lab_holds_the_emulated_seesaw_level(seesaw_run):

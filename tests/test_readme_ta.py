@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from hil_helpers import emulator, lab
+from hil_helpers import emulator, lab, until_the_link_holds
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -67,13 +67,13 @@ def test_the_noisy_link_example_runs_a_session_until_its_restart(tmp_path):
     # set-up (identify, the delay's measurement, configure) took 5.8 s. A restart 4 s after connecting came before the
     # session streamed, the lab configured the restarted rig like any other, and the session ran until the test's timeout.
     options = _emulator_example("--byte-error-rate")
-    for attempt in range(2):
+    def session(attempt: int):
         with emulator(*options, "--raise-after", "0.3") as emu:
-            result = lab("--port", emu.port, "--demo", "--out", str(tmp_path / f"noisy{attempt}"), stdin="s\n", timeout=60)
-        if "the rig restarted" in result.stdout:
-            break
-        # The real-time link lost on this shared host (watchdog, a pty stall) before the restart: again.
-        print(f"the session ended before the restart; again:\n{result.stdout[-300:]}")
+            return lab("--port", emu.port, "--demo", "--out", str(tmp_path / f"noisy{attempt}"), stdin="s\n", timeout=60)
+
+    # A session that ended before the restart lost the real-time link on this shared host (watchdog, a pty stall): again.
+    result = until_the_link_holds(
+        session, lambda result: None if "the rig restarted" in result.stdout else f"ended before the restart:\n{result.stdout[-300:]}", attempts=2)
     assert "the rig restarted" in result.stdout, result.stdout + result.stderr
     assert re.search(r"N = \d period\(s\) holds \(\d+ of 1000 answers late; \d+ frames from the rig corrupted", result.stdout), result.stdout
     crc = int(re.search(r"(\d+) CRC errors", result.stdout).group(1))  # type: ignore[union-attr]

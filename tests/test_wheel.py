@@ -30,7 +30,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
-from hil_helpers import PortProcess
+from hil_helpers import PortProcess, ended_by, last_line, until_the_link_holds
 
 REPO = Path(__file__).resolve().parents[1]
 FAKE_COMPILERS = ("cc", "gcc", "clang", "c99", "tcc", "x86_64-w64-mingw32-gcc")
@@ -178,12 +178,16 @@ def test_lab_demo_against_the_rig_emulator_for_5_s(wheel_env):
     lab ends with the motor off and the log kept, as on a rig); that is printed and the session run again (at most
     three in all). Any other ending fails at once."""
     env: Env = wheel_env["env"]
-    for attempt in range(3):
+
+    def session(attempt: int):
         out = f"runs/lab-{attempt}"
-        status, stdout, stderr = _lab_session(env, out)
-        if status == 0 or not any(reason in stdout + stderr for reason in HOST_TOO_SLOW):
-            break
-        print(f"session {attempt + 1} ended early on a loaded host (status {status}): {stdout.strip().splitlines()[-1:]}")
+        return (out, *_lab_session(env, out))
+
+    def lost(run) -> str | None:
+        _, status, stdout, stderr = run
+        return f"status {status}: {last_line(stdout)}" if status != 0 and ended_by(stdout + stderr, HOST_TOO_SLOW) else None
+
+    out, status, stdout, stderr = until_the_link_holds(session, lost)
     assert status == 0, (stdout[-2000:], stderr[-2000:])
     assert "ended by the operator (e)" in stdout, stdout[-2000:]
     for name in ("rig_log.csv", "run.mat", "metrics.json", "timing.json"):
