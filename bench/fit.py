@@ -9,7 +9,8 @@ by the wall clock:
 
 * **one forward replay**: the fit's own compiled replay of the log under the true law, once;
 * **the yardstick**: ``PlantModel().simulate`` over the log, a Python loop of one CasADi call per
-  sample (RK4 with 0.1 ms sub-steps), as the references in ``tests/`` simulate a log;
+  sample (RK4 with 0.1 ms sub-steps), as the references in ``tests/`` simulate a log; the fastest of
+  three runs;
 * **the fit** (compiled functions already cached: a first fit on a machine also compiles them).
 
 Bar: the fit within 10 times the yardstick.
@@ -30,6 +31,7 @@ import sys
 import time
 
 BAR = 10.0
+YARDSTICK_RUNS = 3
 
 
 def timed(function):
@@ -70,11 +72,14 @@ def main() -> int:
         log = synthetic_log("ramps with holds", true, duration=duration, voltage_noise=0.0)
         x0 = np.array([log.x[0], 0.0, 0.0, 0.0])
         _, r_wall, r_cpu = timed(lambda: replay([true], log.V[:-1], log.t[:-1], x0))
-        _, y_wall, y_cpu = timed(lambda: PlantModel().simulate(true, log.V[:-1], log.period, x0))
+        # The yardstick's best of YARDSTICK_RUNS: one run varied 2.2-2.6 s on the 25 s log here (session 34); the
+        # fastest makes the ratio the strictest.
+        y_wall, y_cpu = min((timed(lambda: PlantModel().simulate(true, log.V[:-1], log.period, x0))[1:] for _ in range(YARDSTICK_RUNS)),
+                            key=lambda w_c: w_c[1])
         result, f_wall, f_cpu = timed(lambda: fit_parameters([log], start))
         print(f"\n{duration:.0f} s log, {len(log)} samples")
         print(f"  one forward replay (compiled):      {r_cpu:8.3f} s CPU {r_wall:8.3f} s wall")
-        print(f"  yardstick (PlantModel.simulate):    {y_cpu:8.3f} s CPU {y_wall:8.3f} s wall")
+        print(f"  yardstick (PlantModel.simulate, best of {YARDSTICK_RUNS}): {y_cpu:8.3f} s CPU {y_wall:8.3f} s wall")
         print(f"  fit:                                {f_cpu:8.3f} s CPU {f_wall:8.3f} s wall "
               f"= {f_cpu / r_cpu:.0f} replays, {f_cpu / y_cpu:.1f}x the yardstick (bar {BAR:.0f}x): {'PASS' if f_cpu <= BAR * y_cpu else 'FAIL'}")
         errors = "  ".join(f"{n} {100 * (result.values[n] / getattr(true, n) - 1):+.1f}% ({result.determination[n][0]})" for n in result.names)

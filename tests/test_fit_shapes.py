@@ -198,7 +198,8 @@ def test_a_log_sampled_at_100_or_200_hz_fits(rate, seed):
             assert abs(result.values[name] / getattr(TEST_RIG, name) - 1) < 0.2, (name, result.values[name])
 
 
-@pytest.mark.parametrize("shape, lag", [("random steps", 1), ("random steps", -1), ("chirp", 1)])
+# Each sign once, on two shapes (each case fits twice, some 45 CPU-s; random steps a sample early also passed, session 33).
+@pytest.mark.parametrize("shape, lag", [("random steps", -1), ("chirp", 1)])
 def test_a_voltage_logged_a_sample_early_or_late_is_found_and_fitted_shifted(shape, lag, tmp_path):
     # Loggers differ on whether a row's voltage is the one applied from its time on or the one that brought the cart
     # there. Random steps (unseen rig, 12 s) with the voltage a sample early: the answer missed by 2.9 steps, every
