@@ -62,3 +62,32 @@ def test_a_search_better_on_the_pieces_but_worse_on_the_whole_log_leaves_the_ans
     monkeypatch.setattr(fit_module, "EVOLVE_ABOVE_STEPS", 0.0)  # it runs whatever the answer's replay
     kept = fit_module._evolved(setup, answer)
     assert kept is answer and np.array_equal(kept.polished.theta, theta)
+
+
+@pytest.mark.parametrize("search_seconds", [1.0, None])
+def test_cma_es_replays_at_most_search_seconds_of_a_long_log_and_all_of_a_short_one(monkeypatch, search_seconds):
+    """Longer than STAGE_SECONDS (2 s here), the 4 s log's CMA-ES runs replay SEARCH_SECONDS (1 s) of pieces, and what
+    each found is polished on the 2 s the polish sees; not longer (None: the limits as shipped), all see the whole log."""
+    if search_seconds is not None:
+        monkeypatch.setattr(fit_module, "STAGE_SECONDS", 2.0)
+        monkeypatch.setattr(fit_module, "PIECE_SECONDS", 1.0)
+        monkeypatch.setattr(fit_module, "SEARCH_SECONDS", search_seconds)
+    calls = []  # (function, samples replayed), in order
+    for name in ("evolve", "polish"):
+        original = getattr(_polish, name)
+
+        def spy(logs, *args, _original=original, _name=name, **kwargs):
+            calls.append((_name, sum(a.n for a in logs)))
+            return _original(logs, *args, **kwargs)
+
+        monkeypatch.setattr(_polish, name, spy)
+    log = synthetic_log("random steps", RIGS["unseen"], duration=4.0, voltage_noise=0.0)
+    fit_module.fit_parameters([log], PlantParameters.preset("none"))
+    evolved = [n for name, n in calls if name == "evolve"]
+    after = [calls[i + 1][1] for i, (name, _) in enumerate(calls[:-1]) if name == "evolve" and calls[i + 1][0] == "polish"]
+    assert evolved and after  # the global search ran (it always does on a cart's log), and its answer was polished
+    if search_seconds is None:
+        assert set(evolved) == set(after) == {len(log) - 1}
+    else:
+        assert max(evolved) <= 1.1 / log.period  # a piece of 1 s
+        assert min(after) >= 1.9 / log.period  # 2 pieces
