@@ -96,9 +96,11 @@ def test_a_fit_of_one_parameter_runs_no_evolution_strategy(monkeypatch):
     monkeypatch.setattr(_polish, "evolve", lambda *args, **kwargs: runs.append(args) or (args[2], math.inf))
     monkeypatch.setattr(fit_module, "_cost_of", lambda *args: 0.0)
     polished = _polish.Polished(np.ones(2), 1.0, 1.0, 0, 0)
-    answer = fit_module._Answer(SimpleNamespace(theta=np.ones(2)), polished, [], [], rms=1.0)  # far off: every stage would run
+    whole: list = []  # what the polish and CMA-ES replay: the same (a short log's whole)
+    answer = fit_module._Answer(SimpleNamespace(theta=np.ones(2), whole=[]), polished, whole, whole, rms=1.0)  # far off: every stage would run
     for names, expected in ((("force_gain",), 0), (("Beq", "force_gain"), 1)):
-        setup = SimpleNamespace(names=names, with_pendulum=False, step=1e-5, space=None, theta0=np.ones(len(names)), progress=print)
+        setup = SimpleNamespace(names=names, with_pendulum=False, step=1e-5, space=None, theta0=np.ones(len(names)), progress=print,
+                                search_pieces=[])
         runs.clear()
         assert fit_module._evolved(setup, answer, "answer") is answer
         assert (len(runs) > 0) == bool(expected), (names, len(runs))
