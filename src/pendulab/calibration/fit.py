@@ -556,6 +556,23 @@ def _rival(setup: _Setup, theta: np.ndarray, cost: float) -> None:
         setup.rivals.append((np.array(theta, dtype=float), float(cost)))
 
 
+def _search_pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int]) -> list[tuple[RampLog, int, int]]:
+    """What CMA-ES replays (:data:`SEARCH_SECONDS`): whole logs up to STAGE_SECONDS in all, pieces of longer ones."""
+    if sum(log.duration for log in logs) <= STAGE_SECONDS:
+        return [(log, j, 0) for j, log in enumerate(logs)]
+    return _pieces(logs, interval_samples, min(SEARCH_SECONDS, STAGE_SECONDS))
+
+
+def _sampled(setup: _Setup, answer: _Answer) -> list[_polish.Anchors]:
+    """The answer's whole logs cut to what CMA-ES replays (``answer.searched`` itself where that is the whole logs too)."""
+    return _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)
+
+
+def _cost_there(setup: _Setup, sampled: list[_polish.Anchors], searched: list[_polish.Anchors], polished: _polish.Polished) -> float:
+    """``polished``'s cost on ``sampled`` (:func:`_sampled`): its own where that is what it was polished on."""
+    return polished.cost if sampled is searched else float(_polish.costs(sampled, setup.space, polished.theta[None])[0])
+
+
 def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEstimate],
                pieces: list[tuple[RampLog, int, int]] | None = None) -> list[_polish.Anchors]:
     """The logs' anchors cut to the pieces (default ``setup.pieces``; long logs are searched on pieces, each from its state estimate)."""
@@ -666,11 +683,11 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
     above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, GLOBAL_SEEDS)}[start]
     if answer.rms <= above * setup.step or (start != "answer" and setup.with_pendulum) or len(setup.names) < 2:  # one parameter: the polish's scans
         return answer
-    sampled = _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)  # what CMA-ES replays (SEARCH_SECONDS)
+    sampled = _sampled(setup, answer)
     for i, seed in enumerate(seeds):
         if result.cost <= _cost_of(setup, searched, above) or (start == "search" and result is not answer.polished):
             break
-        here = result.cost if sampled is searched else float(_polish.costs(sampled, space, result.theta[None])[0])  # the answer's cost there
+        here = _cost_there(setup, sampled, searched, result)
         if start == "start":
             theta, cost = _polish.evolve(sampled, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS,
                                          give_up=(GLOBAL_GENERATIONS // 2, here))
@@ -733,8 +750,8 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
     if not slip_only(*(sum(r[k] for r in regimes) for k in (0, 1))):
         return answer
     # A log longer than the polish sees whole is moved on what CMA-ES replays (SEARCH_SECONDS), the end polished on all the polish sees.
-    sampled = _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)
-    moved, cost = result, result.cost if sampled is searched else float(_polish.costs(sampled, setup.space, result.theta[None])[0])
+    sampled = _sampled(setup, answer)
+    moved, cost = result, _cost_there(setup, sampled, searched, result)
     for sign in (1.0, -1.0):
         for _ in range(SCALE_STEPS):
             found = _at_scale(setup, sampled, moved.theta, sign * SCALE_STEP)
@@ -1065,7 +1082,7 @@ def fit_parameters(
     setup = _Setup(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
         space=_polish.Space(params0, names, scales, lower, upper, prior), stride=stride,
-        pieces=_pieces(logs, stride), search_pieces=_pieces(logs, stride, min(SEARCH_SECONDS, STAGE_SECONDS) if sum(log.duration for log in logs) > STAGE_SECONDS else math.inf),
+        pieces=_pieces(logs, stride), search_pieces=_search_pieces(logs, stride),
         voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
     )
     # The replay and the observer, compiled once per machine.
