@@ -8,8 +8,7 @@
   :func:`save_calibration`, :func:`default_calibration`;
 - :mod:`~pendulab.calibration.logs`: :class:`RampLog`, :func:`read_log`, :func:`write_log`.
 
-The submodules import CasADi, fmpy and scipy; this package imports them lazily so that
-``from pendulab.calibration.files import load_calibration`` stays light.
+The submodules import CasADi, fmpy and scipy, loaded lazily here, so ``from pendulab.calibration.files import load_calibration`` stays light.
 """
 
 from __future__ import annotations

@@ -1,17 +1,12 @@
 """The fit's search for the cart alone: least squares on an observer's one-sample predictions.
 
-The replay under the true stick-slip law is what a fit is judged by, but as an objective it is a
-needle: a breakaway a millisecond early shifts the rest of a stretch (on a sweep, ``v2`` 1 % off
-replays tens of encoder steps off). The same compiled plant, corrected after every sample towards the
-logged position (:func:`pendulab.calibration._replay.observe`, a Luenberger observer of bandwidth
-``omega``), forgets such a shift within ``1/omega``: along each parameter over +-30 % its prediction
-errors fall to a single minimum at the true values. A wide bandwidth first (a wide basin), then a
-narrower one (nearer the replay); then the polish (:func:`pendulab.calibration._polish.polish`).
+The replay under the true stick-slip law is what a fit is judged by, but as an objective it is a needle: a breakaway a millisecond early shifts the
+rest of a stretch (a sweep's ``v2`` 1 % off: tens of encoder steps). The plant, corrected after each sample towards the logged position
+(:func:`pendulab.calibration._replay.observe`, a Luenberger observer of bandwidth ``omega``), forgets such a shift within ``1/omega``: along each
+parameter over +-30 % its prediction errors have one minimum, at the true values; then the polish (:func:`pendulab.calibration._polish.polish`).
 
-The search is Levenberg-Marquardt in the logarithms of the scaled parameters, with the Jacobian by
-central differences (one batched observer run for all of them, and one for a ladder of damping
-factors), from several starts (the given values, the logs' own estimate): each
-start a few iterations, then the best one to convergence.
+The search is Levenberg-Marquardt in the logarithms of the scaled parameters (central differences and a ladder of damping factors: a batched observer
+run each), from several starts (the given values, the logs' own estimate): each start a few iterations, then the best one to convergence.
 """
 
 from __future__ import annotations
@@ -55,10 +50,9 @@ class Observed:
 def observer_gain(omega: float, period: float, zeta: float = ZETA, outputs: int = 1) -> np.ndarray:
     """Correction of the state ``(x, xdot, alpha, alphadot)`` per unit of output error, after each sample.
 
-    The discrete twin of a second-order observer of natural frequency ``omega`` for the cart's position
-    and speed (``2 zeta omega`` and ``omega**2`` per second, times the sample period): ``(4,)``. With
-    ``outputs=2`` the same for the angle and its rate, ``(4, 2)``; ``omega`` far above the upright
-    pendulum's own unstable pole (about ``sqrt(g / l)``, 5 rad/s) holds it up.
+    The discrete twin of a second-order observer of natural frequency ``omega`` for the cart's position and speed (``2 zeta omega`` and ``omega**2``
+    per second, times the sample period): ``(4,)``. With ``outputs=2`` the same for the angle and its rate, ``(4, 2)``; ``omega`` far above the
+    upright pendulum's own unstable pole (about ``sqrt(g / l)``, 5 rad/s) holds it up.
     """
     column = np.array([2.0 * zeta * omega * period, omega**2 * period])
     if outputs == 1:
@@ -122,8 +116,7 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
     tried = [levenberg_marquardt(logs, space, s, OMEGAS[0], START_ITERATIONS) for s in starts]
     best = min(tried, key=lambda o: o.cost)
     runs, iterations = sum(o.runs for o in tried), sum(o.iterations for o in tried)
-    # Robust scans (scan_directions) where slow logs hide other basins: B folded into Beq is only 0.6 % worse at
-    # the widest bandwidth on a slow triangle wave, 8 % at the narrower one.
+    # Scans (scan_directions) for basins slow logs hide: on a slow triangle wave B folded into Beq is 0.6 % worse at OMEGAS[0], 8 % at OMEGAS[-1].
     omega = OMEGAS[-1]
 
     def observed_costs(thetas: np.ndarray) -> np.ndarray:  # the observer's cost of each row (squared errors and prior)

@@ -1,11 +1,9 @@
 """The fit's last stage and its check: the logs replayed under the true stick-slip law.
 
-:func:`pendulab.calibration.fit.fit_parameters` first searches an observer of the replay
-(:mod:`pendulab.calibration._observer`), whose corrections blur what a threshold a per cent off does.
-Here the answer is polished on what the fit is finally judged by, a replay of every log through the
-plant with the law's switches as they are (:mod:`pendulab.calibration._replay`), restarted where the
-log gives the state (:class:`Anchors`): :func:`polish`, and beside it :func:`scan_directions`,
-:func:`valley`, :func:`walk` and :func:`evolve`; :func:`profile` says what the logs determine.
+:func:`pendulab.calibration.fit.fit_parameters` first searches an observer of the replay (:mod:`pendulab.calibration._observer`), whose corrections
+blur what a threshold a per cent off does. Here the answer is polished on what the fit is finally judged by, a replay of every log through the plant
+with the law's switches as they are (:mod:`pendulab.calibration._replay`), restarted where the log gives the state (:class:`Anchors`): :func:`polish`,
+and beside it :func:`scan_directions`, :func:`valley`, :func:`walk` and :func:`evolve`; :func:`profile` says what the logs determine.
 """
 
 from __future__ import annotations
@@ -65,8 +63,7 @@ def rest_samples(period: float) -> int:
 def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple[int, int]]:
     """Rests of the cart, ``[(first, stop), ...]``: runs where the position stays put for :data:`REST_WINDOW`.
 
-    In the lab's law a stuck cart is not quite still: friction cancels the motor's force, while
-    ``Beq`` slows the speed it entered with (below ``v1``) only exponentially, over a time ``Mc/Beq``.
+    In the lab's law a stuck cart creeps: friction cancels the motor's force, while ``Beq`` slows its speed (below ``v1``) only over ``Mc/Beq``.
     """
     w = rest_samples(period)
     if len(x) <= w:
@@ -77,8 +74,7 @@ def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple
 
 
 def _line(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
-    """``(value at t = 0, slope)`` of the least-squares line through ``(t, x)``: by :func:`pendulab.exact.lstsq`, not
-    ``numpy.polyfit``, whose LAPACK call gave other last bits with OpenBLAS's AVX2 kernels than with its SSE3 ones."""
+    """``(value at t = 0, slope)`` of the least-squares line through ``(t, x)`` by :func:`exact.lstsq` (``numpy.polyfit``'s bits vary by CPU)."""
     slope, value = exact.lstsq(np.column_stack([t, np.ones_like(t)]), x)
     return float(value), float(slope)
 
@@ -94,13 +90,11 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
         w = rest_samples(log.period)
         spans = rests(log.x[:used], step, float(sigma[0]), log.period)
         if spans and spans[0][0] == 0:
-            # A log that starts at rest starts from the rest's line, not from a smoothed speed: a stuck
-            # cart keeps a speed below v1 (decaying over Mc/Beq), and 1 mm/s too much is a lasting 0.1 mm.
+            # Starting at rest: from the rest's line, not a smoothed speed (a stuck cart creeps below v1; 1 mm/s too much is a lasting 0.1 mm).
             hi = min(spans[0][1], 3 * w)
             x0[:2] = _line(log.t[:hi] - log.t[0], log.x[:hi])
         for first, stop in spans:
-            # Late in the rest, where the creep has died down; position and speed from a line through
-            # the positions around that sample (the encoder's steps average out over it).
+            # Late in the rest (the creep has died down): position and speed from a line through the positions around it (encoder steps average out).
             k = max(first, stop - w)
             if 0 < k < used - 1:
                 lo, hi = max(first, k - 2 * w), min(stop, k + w)
@@ -121,10 +115,8 @@ RESTART_STEPS = np.array([1e-5, 1e-4, 1e-4, 1e-3])
 def settled(a: Anchors, vector: np.ndarray, free: tuple[str, ...] | None, iterations: int = 4) -> Anchors:
     """``a`` with its first state and each restart's chosen to replay its own stretch best at the parameters ``vector``.
 
-    An observer's state estimate is causal: its speeds lag, and an upright pendulum's replay, open-loop unstable, grows what
-    they miss (the unseen rig's closed loop: 1.4 encoder steps). Gauss-Newton on each stretch's weighted errors, the Jacobian
-    by central differences (one replay moves one coordinate of every stretch's state at once: eight per iteration); a stretch
-    keeps a step only where it lowers its cost.
+    An observer's state estimate is causal: its speeds lag, and an upright pendulum's unstable replay grows what they miss (the unseen rig's closed
+    loop: 1.4 encoder steps). Gauss-Newton on each stretch's weighted errors by central differences; a stretch keeps only steps that lower its cost.
     """
     starts = np.array([0, *sorted(a.restarts)], dtype=int)
     bounds = np.r_[starts, a.n]
@@ -172,8 +164,7 @@ VOLTAGE_NOISE = 1e-3
 def voltage_noise(V: np.ndarray) -> float:
     """Robust estimate of the sample noise on a logged voltage (V): the spread of its second differences.
 
-    Steps, ramps and slow sines have (nearly) no second difference except at a few edges, which the
-    median absolute deviation ignores; white noise of ``sigma`` has second differences of ``sqrt(6) sigma``.
+    Steps, ramps and slow sines have (nearly) no second differences but at a few edges, which the MAD ignores; white noise's are ``sqrt(6) sigma``.
     """
     if len(V) < 5:
         return 0.0
@@ -190,8 +181,7 @@ TREND_WEIGHT = 100.0
 def trend_filter(y: np.ndarray, weight: float, tol: float = 1e-4, max_iter: int = 60) -> np.ndarray:
     """L1 trend filtering: ``argmin 1/2 |y - x|^2 + weight |D2 x|_1`` (a piecewise-linear estimate).
 
-    The primal-dual interior-point method of Kim, Koh, Boyd and Gorinevsky (SIAM Review 51, 2009) on
-    the dual, a box-constrained quadratic problem; each Newton step solves one pentadiagonal system.
+    Primal-dual interior point on the dual, a box-constrained QP (Kim, Koh, Boyd, Gorinevsky, SIAM Review 51, 2009): a pentadiagonal solve per step.
 
     Examples
     --------
@@ -265,9 +255,8 @@ DENOISED_DECIMALS = 7
 def denoised_voltage(V: np.ndarray) -> np.ndarray:
     """The applied voltage estimated from a noisy logged one, keeping its steps and its ramps.
 
-    The voltage is split at jumps of more than :data:`JUMP_SIGMAS` noise sigmas (steps), and each piece
-    goes through :func:`trend_filter` (piecewise linear: ramps, holds and their corners stay). A
-    9-sample median would keep steps but round a slow ramp into a staircase of the noise's size.
+    The voltage is split at jumps of more than :data:`JUMP_SIGMAS` noise sigmas (steps), and each piece goes through :func:`trend_filter` (piecewise
+    linear: ramps, holds and their corners stay). A 9-sample median would keep steps but round a slow ramp into a staircase of the noise's size.
     """
     V = np.asarray(V, dtype=float)
     sigma = voltage_noise(V)
@@ -311,8 +300,7 @@ class Polished:
 class Space:
     """The fitted parameters as the search sees them: scaled values ``theta`` (value / scale).
 
-    ``params0`` gives every parameter that is not fitted; ``lower``/``upper`` bound ``theta``;
-    ``prior`` is ``(centre, weight)`` of the fit's weak prior, or None.
+    ``params0`` gives every parameter not fitted; ``lower``/``upper`` bound ``theta``; ``prior`` is ``(centre, weight)`` of the weak prior, or None.
     """
 
     params0: PlantParameters
@@ -363,8 +351,8 @@ class Space:
 def costs(logs: list[Anchors], space: Space, thetas: np.ndarray) -> np.ndarray:
     """The replay cost (sum of squared weighted errors) of each of ``thetas`` ``(m, n)``; a failed replay costs 1e6 per error.
 
-    A set already replayed on ``logs`` is not replayed again (:meth:`Space.memo`): a scan's second round where nothing
-    moved, a valley's own point. Its cost is the same bits: each set is one lane of the replay, whatever its batch.
+    A set already replayed on ``logs`` is not replayed again (:meth:`Space.memo`): a scan's second round where nothing moved, a valley's own point.
+    Its cost is the same bits: each set is one lane of the replay, whatever its batch.
     """
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     memo, keys = space.memo(logs), [row.tobytes() for row in thetas]
@@ -376,14 +364,12 @@ def costs(logs: list[Anchors], space: Space, thetas: np.ndarray) -> np.ndarray:
     return np.array([memo[k] for k in keys])
 
 
-#: Scaled together in the common-scale direction: the gain, the forces and the drags together change
-#: only the inertia's share of the motion (quasi-static motion, ``gain V = (B + Beq) v + F``, is blind to it).
+#: The common scale's members: together they change only the inertia's share of the motion (quasi-static ``gain V = (B + Beq) v + F`` is blind to it).
 SCALED = ("F1", "F2", "B", "Beq", "force_gain")
 
 
 def moved(space: Space, theta: np.ndarray, direction: str, x: float) -> np.ndarray:
-    """``theta`` moved by ``x`` along ``direction``: a fitted name (its log), ``"scale"`` (every one of
-    :data:`SCALED` by ``exp(x)``) or ``"split"`` (the share of ``B`` in ``B + Beq``, in logit units)."""
+    """``theta`` moved ``x`` along ``direction``: a name (log), ``"scale"`` (:data:`SCALED` by ``exp(x)``) or ``"split"`` (``B``'s logit share)."""
     names = space.names
     v = theta * space.scales
     if direction == "scale":
@@ -430,9 +416,8 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                     points: int = 16, rounds: int = 2, cost_of: Callable[[np.ndarray], np.ndarray] | None = None) -> Polished:
     """Robust 1-D scans of the replay cost (or of ``cost_of(thetas)``) along every direction of :func:`directions_of`, ``rounds`` times.
 
-    Each scan (coarse, then fine around the best) is one batched replay of ``points`` offsets from the
-    current point within ``span`` (the split four times wider, in logit units); the best is kept.
-    A scan sees another basin along its axis, where a local search sees only the slope: the slow logs'
+    Each scan (coarse, then fine around the best) is one batched replay of ``points`` offsets from the current point within ``span`` (the split four
+    times wider, in logit units); the best is kept. A scan sees another basin along its axis, where a local search sees only the slope: the slow logs'
     traps (``B`` folded into ``Beq``; every force and drag at a wrong common scale) lie along these axes.
     """
     theta = space.project(np.asarray(theta, dtype=float).copy())
@@ -452,8 +437,7 @@ def scan_directions(logs: list[Anchors], space: Space, theta: np.ndarray, spans:
                     X = np.linspace(-span, span, points) * (4.0 if d == "split" else 1.0 if d == "scale" else 2.0)
                     trials = np.array([moved(space, theta, d, x) for x in X])
                 if d == "split" and "v2" in names and coarse:
-                    # B acts only in the slip region (below v2 and F2): out of the trap "B = 0, Beq = the whole drag"
-                    # the split lowers the cost only with a slip region the cart's speeds reach and its drive stays in.
+                    # B acts only below v2 and F2: the split leaves the trap "B = 0" only with a slip region the cart reaches and stays in.
                     factors = SLIP_F2_FACTORS if {"F1", "F2"} <= set(names) else (None,)
                     extra = [slip_region(space, th, v2, factor) for factor in factors for v2 in SLIP_SPEEDS for th in trials]
                     trials = np.vstack([trials, extra])
@@ -479,14 +463,11 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
            scan: tuple[str, ...] = ("F1", "F2", "v2"), scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015), scan_rounds: int = 2) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
 
-    The replay's error is not smooth in the parameters (a breakaway that happens or not is a jump), so derivatives
-    mislead. The thresholds ``scan``, whose jumps dominate, are first scanned one by one, ``scan_rounds`` times, over
-    ``scan_spans`` (coarse then fine, 15 factors log-spaced within ``1 + span`` either way). Each iteration tries every
-    parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of :data:`PAIRS` (pairs that
-    trade off: the slip region's corner, the two forces, ``Beq`` against the gain) and the last good
-    move, in one batched replay, and keeps the best if it lowers the cost; else the radius shrinks threefold, down to
-    0.1 %. Bounds and ``F1 <= F2``, ``v1 <= v2`` hold by projection. It stops once it has replayed ``work`` samples
-    (parameter sets x samples; see fit.POLISH_WORK).
+    The replay's error is not smooth in the parameters (a breakaway that happens or not is a jump), so derivatives mislead. The thresholds ``scan``,
+    whose jumps dominate, are first scanned one by one, ``scan_rounds`` times, over ``scan_spans`` (coarse then fine, 15 factors log-spaced within
+    ``1 + span`` either way). Each iteration tries every parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of
+    :data:`PAIRS` and the last good move, in one batched replay, and keeps the best if it lowers the cost; else the radius shrinks threefold, down to
+    0.1 %. Bounds hold by projection (:meth:`Space.project`). It stops once it has replayed ``work`` samples (sets x samples: fit.POLISH_WORK).
     """
     names, project = space.names, space.project
     done = {"samples": 0.0, "replays": 0}
@@ -500,8 +481,7 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
     theta = project(np.asarray(theta, dtype=float).copy())
     cost = start_cost = float(cost_of(theta[None])[0])
     radius, it, n = 0.02, 0, len(theta)
-    # The thresholds first (see the docstring), one batched replay per scan. (A coarser sub-step than the plant's,
-    # 0.5 ms, is three times faster, but it moved the replay by about an encoder step: a log of steps went astray.)
+    # Thresholds first (the docstring). (A 0.5 ms sub-step runs 3 times faster but moved the replay an encoder step: a log of steps went astray.)
     scanned = theta
     for name in [n_ for n_ in scan if n_ in names] * scan_rounds:
         j = names.index(name)
@@ -533,8 +513,7 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
     return Polished(theta=theta, cost=cost, start_cost=start_cost, iterations=it, replays=done["replays"])
 
 
-#: The slip region's corner: the cart leaves it at ``F2`` of drive or ``v2`` of speed, whichever comes first, so
-#: one moved alone shifts every exit and the replay's cost runs in a narrow valley along the pair (:func:`valley`).
+#: The slip region's corner: the cart leaves at drive ``F2`` or speed ``v2``, whichever first, so the cost runs in a narrow valley along the pair.
 PARTNERS = {"F2": "v2", "v2": "F2"}
 #: How far (log) a partner is scanned: a force finely, a speed widely (along the corner 1 % of ``F2`` is worth about 12 % of ``v2``).
 PARTNER_SPANS = {"F2": 0.03, "v2": 0.3}
@@ -543,11 +522,9 @@ PARTNER_SPANS = {"F2": 0.03, "v2": 0.3}
 def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: Sequence[str], coarse: int = 16, fine: int = 8) -> tuple[np.ndarray, np.ndarray]:
     """For each of ``thetas``, the best value of its threshold's :data:`PARTNERS` (the others held).
 
-    ``moved_names[i]`` is the threshold that row ``i`` moved; its partner is scanned over ``coarse`` log
-    offsets within :data:`PARTNER_SPANS` either way, then over ``fine`` between the best one's neighbours
-    (a valley a few tenths of a per cent wide lies between two coarse points, and the cost falls towards
-    it). Two batched replays in all, of whole batches of 16 for an even number of rows (see
-    :func:`scan_directions`). Returns the best costs ``(m,)`` and thetas ``(m, n)``.
+    ``moved_names[i]`` is the threshold that row ``i`` moved; its partner is scanned over ``coarse`` log offsets within :data:`PARTNER_SPANS` either
+    way, then over ``fine`` between the best one's neighbours (a valley a few tenths of a per cent wide lies between two coarse points, and the cost
+    falls towards it). Two batched replays, of whole batches of 16 for an even number of rows. Returns the best costs ``(m,)`` and thetas ``(m, n)``.
     """
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     m = thetas.shape[0]
@@ -576,11 +553,10 @@ WALK_OFFSETS = (-0.1, -0.06, -0.03, 0.03, 0.06, 0.1)
 
 
 def walk(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float) -> tuple[np.ndarray, float]:
-    """Along the slip region's corner from ``theta`` (of replay cost ``cost``): the best of :data:`WALK_OFFSETS`
-    of ``v2``, each with its best ``F2`` (:func:`valley`).
+    """Along the slip region's corner from ``theta`` (cost ``cost``): the best :data:`WALK_OFFSETS` of ``v2`` (each with its :func:`valley` ``F2``).
 
-    A pattern search stops anywhere on the corner's valley floor (each of its moves leaves it); the floor
-    may fall away from there. Returns the best point and its cost (``theta`` and ``cost`` if none is lower).
+    A pattern search stops anywhere on the corner's valley floor (each of its moves leaves it); the floor may fall away from there. Returns the best
+    point and its cost (``theta`` and ``cost`` if none is lower).
     """
     if "v2" not in space.names or "F2" not in space.names:
         return theta, cost
@@ -591,37 +567,31 @@ def walk(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float) -> t
     return (T[best], float(c[best])) if c[best] < cost else (theta, cost)
 
 
-#: The local evolution strategy (:func:`evolve`): its first step (log units), generations and population
-#: (one compiled batch of the replay per generation).
+#: The local evolution strategy (:func:`evolve`): its first step (log units), generations and population (one compiled batch per generation).
 EVOLVE_SIGMA = 0.02
 EVOLVE_GENERATIONS = 40
 EVOLVE_POPULATION = 16
-#: :func:`evolve` stops when its step has shrunk below STALL_STEP of its first and its best cost fell by less than STALL_GAIN over
-#: the last STALL_GENERATIONS generations: on slow ramps (25 and 60 s) runs that had settled by generation 80-160 spent the rest of
-#: their 200 lowering the cost by 1e-5. Not on the best cost alone: a run that later found the rig's basin had kept its best for 20
-#: generations near its start (its step still 0.25-0.36), and the 60 s log then stopped at 1.7 steps with the force gain -14.5 %.
+#: :func:`evolve` stops once its step is under STALL_STEP of its first and its best fell less than STALL_GAIN in STALL_GENERATIONS generations (runs
+#: settled by generation 80-160 then lowered it 1e-5); not on cost alone (a later winner kept its best 20 generations, step 0.25-0.36).
 STALL_GENERATIONS = 25
 STALL_GAIN = 1e-3
 STALL_STEP = 1 / 30
-#: :func:`evolve`'s samples are rounded to this many decimals (log units) before they are replayed and told: numpy's products
-#: (OpenBLAS, its kernels chosen by CPU) move them in their last bits, and a sample rounded the other way sends the search
-#: elsewhere. A run draws some 22400 coordinates; with its state rounded too (:func:`_canonical_state`) they differ by some 1e-16,
-#: and at 1e-9 about one run in a hundred would meet a boundary. Not coarser: late in a run the covariance's condition reaches
-#: 1e7 and its narrow axes' steps 1e-6 (at 1e-6 the development corpus met the bar on 17 of 22 cases instead of 22).
+#: :func:`evolve`'s samples are rounded to this many decimals (log units) before they are replayed and told: numpy's products (OpenBLAS, its kernels
+#: chosen by CPU) move them in their last bits, and a sample rounded the other way sends the search elsewhere. A run draws some 22400 coordinates,
+#: some 1e-16 apart with its state rounded too (:func:`_canonical_state`): at 1e-9 about one run in a hundred meets a boundary. Not coarser: the
+#: covariance's narrow axes step 1e-6 late in a run (at 1e-6 the corpus met the bar on 17 of 22 cases instead of 22).
 SAMPLE_DECIMALS = 9
 #: The covariance is rounded to this share of ``sqrt(C_ii C_jj)`` before its eigen-decomposition (:func:`_covariance_eigh`).
 COVARIANCE_GRID = 2.0**-30
 
 
 def _covariance_eigh(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """CMA-ES's eigen-decomposition (its ``CMA_eigenmethod``): ``C``, its last bits rounded away, by :func:`exact.eigh`,
-    whose eigenvectors' signs and bits are the same on any CPU (LAPACK's are not: a flipped column is another sample)."""
+    """CMA-ES's ``CMA_eigenmethod``: :func:`exact.eigh` of ``C`` rounded, with the same signs and bits on any CPU (LAPACK flips columns)."""
     return exact.eigh(_rounded_covariance(C))
 
 
 def _rounded_covariance(C: np.ndarray) -> np.ndarray:
-    """``C`` (symmetric) on a grid of a power of two near ``sqrt(C_ii C_jj) * COVARIANCE_GRID``: dividing by it and multiplying
-    back add no bits of their own."""
+    """``C`` (symmetric) on a grid of a power of two near ``sqrt(C_ii C_jj) * COVARIANCE_GRID``: dividing by it and multiplying back add no bits."""
     C = np.asarray(C, dtype=float)
     grid = np.ldexp(1.0, np.frexp(np.sqrt(np.outer(np.diag(C), np.diag(C))) * COVARIANCE_GRID)[1])
     rounded = np.round(C / grid) * grid
@@ -629,9 +599,9 @@ def _rounded_covariance(C: np.ndarray) -> np.ndarray:
 
 
 def _canonical_state(es) -> None:
-    """CMA-ES's state rounded after each generation (pycma's products go through OpenBLAS): its mean (9 decimals, log units),
-    step (9 digits), evolution paths (``ps`` 6 decimals, ``pc`` 7 digits) and covariance (:func:`_rounded_covariance`). Unrounded,
-    their last bits grew with the covariance's condition (to 1e-11 in ``ps`` at 6e6) until a generation sampled elsewhere."""
+    """CMA-ES's state rounded after each generation (pycma's products go through OpenBLAS): its mean (9 decimals, log units), step (9 digits),
+    evolution paths (``ps`` 6 decimals, ``pc`` 7 digits) and covariance (:func:`_rounded_covariance`). Unrounded, their last bits grew with the
+    covariance's condition (to 1e-11 in ``ps`` at 6e6) until a generation sampled elsewhere."""
     es.mean = np.round(np.asarray(es.mean, dtype=float), 9)
     es.sigma = exact.significant(float(es.sigma), 9)
     es.adapt_sigma.ps = np.round(np.asarray(es.adapt_sigma.ps, dtype=float), 6)
@@ -641,16 +611,12 @@ def _canonical_state(es) -> None:
 
 def evolve(logs: list[Anchors], space: Space, theta: np.ndarray, cost: float, seed: int = 19, sigma: float = EVOLVE_SIGMA,
            generations: int = EVOLVE_GENERATIONS, give_up: tuple[int, float] | None = None) -> tuple[np.ndarray, float]:
-    """CMA-ES (:mod:`cma`) on the replay cost around ``theta`` (of cost ``cost``), in log coordinates, its first step
-    ``sigma``, for at most ``generations`` of :data:`EVOLVE_POPULATION`, or until it stalls (:data:`STALL_GENERATIONS`);
-    ``give_up=(g, c)`` stops it after ``g`` generations if it has found no cost below ``c`` by then.
+    """CMA-ES (:mod:`cma`) on the replay cost around ``theta`` (cost ``cost``), in log coordinates from a step ``sigma``, at most ``generations`` of
+    :data:`EVOLVE_POPULATION` or until it stalls (:data:`STALL_GENERATIONS`); ``give_up=(g, c)``: stop at generation ``g`` with no cost below ``c``.
 
-    Derivative-free with a population per step, it steps over the replay cost's small jumps and learns the joint moves the
-    pattern search's fixed directions miss; with a step of a factor e, from the start, it is the fit's global search.
-    Seeded, its samples rounded (:data:`SAMPLE_DECIMALS`), its state rounded after each generation (:func:`_canonical_state`)
-    and its covariance decomposed by :func:`_covariance_eigh`, so that the linear algebra's last bits, which differ between
-    CPUs, do not change what is replayed; numpy's global random state is restored. Returns the best point and its cost
-    (``theta`` and ``cost`` if none is lower).
+    Derivative-free with a population per step, it steps over the replay cost's small jumps and learns the joint moves the pattern search's fixed
+    directions miss. Seeded and rounded (:data:`SAMPLE_DECIMALS`, :func:`_canonical_state`, :func:`_covariance_eigh`) so that CPUs' last bits do not
+    change what is replayed; numpy's global random state is restored. Returns the best point and its cost (``theta`` and ``cost`` if none is lower).
     """
     import cma
 
@@ -682,20 +648,16 @@ PROFILE_OFFSETS = (0.003, 0.01, 0.03, 0.1, 0.3, 0.7)
 DETERMINED, BOUNDED, NOT_IDENTIFIED = "determined", "bounded", "not identified"
 #: The friction law's thresholds: the replay cost is a staircase in each (see :func:`profile`).
 THRESHOLDS = ("F1", "v1", "F2", "v2")
-#: A parameter's range (:class:`Profile` ``allowed``) is where the replay cost stays below this many times the answer's: the
-#: development corpus's true values replay at up to 1.64 times the answer's cost (quantization and noise), and ranges within
-#: one chi-square unit excluded them. The global search's answers replay some logs up to 4 times better than the rig's own values
-#: (a smoothed first state), and 6 of 32 corpus ranges then miss them; wider ranges say nothing (slow ramps: F1's reaches 0 at 3 times).
+#: A parameter's range (:class:`Profile` ``allowed``) is where the replay cost stays below this many times the answer's: the corpus's true values
+#: replay at up to 1.64 times the answer's cost (quantization and noise), and wider ranges say nothing (slow ramps: F1's reaches 0 at 3 times).
 RANGE_COST_RATIO = 2.0
-#: A parameter uncertain by more than this fraction of its value is only bounded (a range, ``allowed``): on a log
-#: of random steps of the unseen rig, F1 -15 % off came out "determined" to +-30 %.
+#: Uncertain by over this share of its value, a parameter is only bounded: the unseen rig's random steps had F1 15 % off "determined" to 30 %.
 MAX_RELATIVE_SIGMA = 0.2
 
 
 @dataclass(frozen=True)
 class Profile:
-    """Per parameter: status, standard uncertainty (scaled; inf unless determined) and the range the
-    replay allows, ``(low, high)`` scaled (``0`` or ``inf`` where the cost never rose)."""
+    """Per parameter: status, uncertainty (scaled; inf unless determined) and allowed range ``(low, high)`` (scaled; 0/inf: no rise)."""
 
     status: tuple[str, ...]
     sigma: np.ndarray
@@ -707,8 +669,7 @@ class Profile:
 def correlation_length(residuals: np.ndarray, sizes: list[int]) -> float:
     """``1 + 2 sum(autocorrelation)`` up to its first zero, sample-weighted over the logs (>= 1).
 
-    A replay's errors come in runs (a breakaway a millisecond late is off for a while), so ``N``
-    errors hold about ``N / k`` independent ones.
+    A replay's errors come in runs (a breakaway a millisecond late is off for a while), so ``N`` errors hold about ``N / k`` independent ones.
     """
     lengths, weights = [], []
     for e in np.split(residuals, np.cumsum(sizes)[:-1]):
@@ -743,22 +704,17 @@ def stretch_of(logs: list[Anchors]) -> np.ndarray:
 def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 3e-3) -> Profile:
     """The replay cost along each parameter (the others held), and along the joint directions, both ways.
 
-    Each parameter and each joint direction of :func:`directions_of` (the common scale; the drag split) is moved by
-    :data:`PROFILE_OFFSETS` (log units; four times those in logit units for the split) both ways. The threshold is one
-    effective chi-square unit, ``k s^2`` (``s^2`` the mean squared weighted error at the answer, ``k`` its
-    :func:`correlation_length`), at least a stretch's mean cost. A side where the cost crosses it bounds the move there
-    (interpolated; for :data:`THRESHOLDS`, whose cost is a staircase, the first offset above). Crossed both ways, the
-    parameter is determined, uncertain by the larger half-width, at least the linearized covariance (central differences
-    of relative ``step``, in the same batched replay) and its change along a joint direction's half-width. A joint
-    direction not bounded both ways leaves none of its members determined: a slow log that never shows the inertia cannot
-    tell the force gain from a common scale of everything. ``F2`` and ``v2`` (:data:`PARTNERS`) count, from the first
-    offset above the threshold outwards, the move with the other's best value (:func:`valley`).
+    Each parameter and joint direction (:func:`directions_of`) is moved by :data:`PROFILE_OFFSETS` both ways (log units; four times those, in logit
+    units, for the split). The threshold is one effective chi-square unit, ``k s^2`` (``s^2`` the answer's mean squared weighted error, ``k`` its
+    :func:`correlation_length`), at least a stretch's mean cost. A side where the cost crosses it bounds the move (interpolated; for
+    :data:`THRESHOLDS` the first offset above). Crossed both ways, the parameter is determined, uncertain by the larger half-width, at least the
+    linearized covariance (central differences, relative ``step``) and its change along a joint direction's half-width. A joint direction open on a
+    side leaves none of its members determined: a slow log never showing the inertia cannot tell the gain from a common scale of everything. ``F2``
+    and ``v2`` (:data:`PARTNERS`) count, from the first offset above the threshold on, the move with the other's best value (:func:`valley`).
 
-    No uncertainty is below the finest offset, nor a threshold's below the distance to its range's farther end (at 100 Hz
-    F1 5.6 % off was called known to 0.3 %). The ranges (``allowed``) are where the cost stays below :data:`RANGE_COST_RATIO`
-    times the answer's, along the parameter and each joint direction it is a member of (``0`` or ``inf`` where it never
-    rises that far). Uncertain by more than :data:`MAX_RELATIVE_SIGMA` of its value, or with a range open on a side, a
-    parameter is only bounded.
+    No uncertainty is below the finest offset, nor a threshold's below the distance to its range's farther end (at 100 Hz F1 5.6 % off was "known" to
+    0.3 %). The ranges (``allowed``) are where the cost stays below :data:`RANGE_COST_RATIO` times the answer's, along the parameter and its joint
+    directions. Uncertain by more than :data:`MAX_RELATIVE_SIGMA` of its value, or with a range open on a side, a parameter is only bounded.
     """
     n = len(theta)
     offsets = np.array(PROFILE_OFFSETS)
@@ -773,8 +729,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     costs = np.einsum("ij,ij->i", R, R)
     r0, cost0 = R[0], float(costs[0])
     k = correlation_length(r0, [a.measured.size for a in logs])
-    # At least one stretch between restarts' worth of cost: a replay's errors are correlated further than
-    # their autocorrelation shows (a threshold crossed or not shifts a whole stretch).
+    # At least a stretch's worth of cost: a replay's errors correlate beyond their autocorrelation (a threshold crossed or not shifts a stretch).
     threshold = max(k * cost0 / r0.size, cost0 / sum(len(a.restarts) + 1 for a in logs))
     m = len(offsets)
     chains = []  # F2 and v2 (PARTNERS): the move with the partner's best value, one batched replay per round
@@ -818,9 +773,8 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     if determined:
         J = ((R[base : base + n] - R[base + n : base + 2 * n]) / (2 * size[:, None])).T[:, determined]
         inverse = exact.lstsq(exact.dot(J.T, J), np.eye(len(determined)))  # times the threshold: the linearized covariance
-        # Cluster-robust (sandwich) covariance with the stretches between restarts as clusters: a replay's
-        # errors within a stretch share one cause (a breakaway early or late, a restart's state), and the
-        # model's own errors pull each stretch its own way; their scatter is an uncertainty too.
+        # Cluster-robust (sandwich) covariance, the stretches between restarts as clusters: a replay's errors within a stretch share one cause (a
+        # breakaway early or late, a restart's state), and the model's own errors pull each stretch its own way.
         clusters = stretch_of(logs)
         scores = np.zeros((int(clusters.max()) + 1, len(determined)))
         np.add.at(scores, clusters, J * r0[:, None])
@@ -830,8 +784,8 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
     for i, d in enumerate(joint):
         up, down = reach(1 + 2 * n * m + 2 * i * m)
         ends = [moved(space, theta, d, x * widths[d]) for x in (up, -down) if math.isfinite(x)]
-        # A member's range covers the joint move's too: moved alone it may be pinned where moved with the others it is not
-        # (slow ramps on the unseen rig: the common scale 8.7 % low, F1 and the gain bounded to a few tenths of a per cent).
+        # A member's range covers the joint move's too: moved alone it may be pinned where moved with the others it is not (slow ramps on the unseen
+        # rig: the common scale 8.7 % low, F1 and the gain bounded to a few tenths of a per cent).
         sides = [(x, sign) for x, sign in zip(reach(1 + 2 * n * m + 2 * i * m, rise=wide), (1.0, -1.0))]
         for j, name in enumerate(space.names):
             if name not in (SCALED if d == "scale" else ("B", "Beq")):
@@ -854,11 +808,9 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         if space.names[j] in THRESHOLDS and 0.0 < allowed[j][0] <= allowed[j][1] < math.inf:
             # A staircase: its first step up says little of where the cost stays low (the docstring; RANGE_COST_RATIO).
             sigma[j] = max(sigma[j], theta[j] - allowed[j][0], allowed[j][1] - theta[j])
-        # Never below the finest offset (and the Jacobian's step; the docstring says why): a half-width interpolated
-        # there is not measured (the sticky rig's chirp: Beq and the force gain 0.3 % off, reported to 0.1 %).
+        # Not below the finest offset or the Jacobian's step, below which nothing is measured (the sticky rig's chirp: Beq 0.3 % off, said 0.1 %).
         sigma[j] = max(sigma[j], abs(theta[j]) * max(math.expm1(offsets[0]), step))
-        # A range open on a side (the docstring): a cost that rises a little and then stays within RANGE_COST_RATIO all the way
-        # to 0 (or infinity) bounds it there, no more (random steps all above F1 on the light rig: F1 "determined" 71 % high).
+        # Open range: the cost rises a little, then stays within RANGE_COST_RATIO to 0 or infinity (the light rig's random steps: F1 71 % high).
         if sigma[j] > MAX_RELATIVE_SIGMA * abs(theta[j]) or not 0.0 < allowed[j][0] <= allowed[j][1] < math.inf:
             status[j], sigma[j] = BOUNDED, math.inf
     return Profile(tuple(status), sigma, tuple(allowed), threshold, k)

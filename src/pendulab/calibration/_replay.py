@@ -1,14 +1,11 @@
 """Compiled replay of logs through the plant under the true (switching) stick-slip law.
 
-The fit's last stage and its check both replay a log's voltage through the plant of
-:func:`pendulab.model.plant.plant_equations` with the law's switches as they are (no smoothing), at
-the plant's own RK4 sub-step (:data:`pendulab.model.plant.MAX_SUBSTEP`), for one or several
-parameter sets at once.
+The fit's last stage and its check replay a log's voltage through the plant of :func:`pendulab.model.plant.plant_equations` with the law's switches as
+they are (no smoothing), at the plant's own RK4 sub-step (:data:`pendulab.model.plant.MAX_SUBSTEP`), for several parameter sets at once.
 
-A replay may *restart* from a known state at chosen samples (:class:`pendulab.calibration._polish.Anchors`).
-One sample's step is a CasADi SX function (:func:`_step`), compiled once per machine to C that runs
-several parameter sets in the lanes of the CPU's vectors (:mod:`pendulab.simd`), the groups of sets on
-the machine's cores (OpenMP); without a compiler CasADi's virtual machine evaluates it, set by set.
+A replay may *restart* from a known state at chosen samples (:class:`pendulab.calibration._polish.Anchors`). One sample's step is a CasADi SX function
+(:func:`_step`), compiled once per machine to C that runs several parameter sets in the lanes of the CPU's vectors (:mod:`pendulab.simd`), the groups
+of sets on the machine's cores (OpenMP); without a compiler CasADi's virtual machine evaluates it, set by set.
 """
 
 from __future__ import annotations
@@ -28,16 +25,15 @@ from pendulab.model.parameters import PlantParameters
 from pendulab.model.plant import MAX_SUBSTEP, step_function, substeps
 from pendulab.native import shared_library
 
-# OpenMP threads that finish their parameter sets sleep instead of spinning (set before libgomp starts):
-# on a busy machine a spinning thread takes the core another process needs.
+# OpenMP threads that finish their sets sleep, not spin (set before libgomp starts): on a busy machine a spinning thread takes a core others need.
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 #: IEEE arithmetic as written, whatever the compiler or CPU: no reassociation and no fused multiply-add. Each parameter set is one vector lane's from
 #: start to end, so the same log replays to the same bits on any x86-64 machine, vector width and thread count: those of CasADi's virtual machine.
 EXACT_MATH = ("-ffp-contract=off", "-fno-fast-math")
 
-#: Groups of lanes interleaved in one thread (:func:`pendulab.simd.statements`): each thread takes WAYS x LANES
-#: parameter sets at a time through the whole log (a short last group repeats the last set).
+#: Groups of lanes interleaved in one thread (:func:`pendulab.simd.statements`): each thread takes WAYS x LANES parameter sets at a time through the
+#: whole log (a short last group repeats the last set).
 WAYS = 4
 
 #: What both drivers share: the lanes of group ``g`` start at ``x0``, each with its set's free parameters.
@@ -104,8 +100,7 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
 """
 
 
-#: At most this many RK4 sub-steps are unrolled into the compiled step; a sample of more (a log coarser than 1 ms) runs
-#: them in chunks of :func:`_chunk` (the C of 100 unrolled sub-steps, a 100 Hz log's, took gcc longer than 5 minutes).
+#: At most this many RK4 sub-steps are unrolled in the compiled step, more run in chunks (:func:`_chunk`): 100 (a 100 Hz log's) took gcc over 5 min.
 MAX_UNROLLED = 10
 
 
@@ -116,14 +111,12 @@ def _chunk(n_sub: int) -> int:
 
 @lru_cache(maxsize=None)
 def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One chunk (:func:`_chunk` of the ``n_sub`` sub-steps) of a sample of the replay, or of the observer of
-    ``observer`` outputs (1: the position; 2: and the angle).
+    """One chunk (:func:`_chunk` of ``n_sub`` sub-steps) of a replay sample, or the observer's with ``observer`` outputs (1: x; 2: x, alpha).
 
-    The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where
-    ``r > 0.5``, its positions only, the speeds carried on, where ``r > 1.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny],
-    corrected[4])``, the correction times ``c`` (1 after a sample's last chunk, else 0). Only the parameters ``free``
-    (indices into :meth:`PlantParameters.names`) are inputs; the others are the constants ``fixed``, so that a cart
-    without a pendulum loses every pendulum term.
+    The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where ``r > 0.5``, its positions only, the speeds
+    carried on, where ``r > 1.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny], corrected[4])``,
+    the correction times ``c`` (1 after a sample's last chunk, else 0). Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are
+    inputs; the others are the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
     """
     step = step_function(False, _chunk(n_sub)).expand()
     s, V, t, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
@@ -141,10 +134,9 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
 
 
 def _by_reciprocals(f: ca.Function) -> ca.Function:
-    """``f`` with each division by a constant (the fixed parameters, compiled in: a cart's mass, the motor's
-    constants) a multiplication by the constant's reciprocal: a division costs the CPU several multiplications'
-    time, and the cart's replay ran 13 % faster. Its results differ from ``f``'s in their last bits only; the compiled
-    replay and CasADi's virtual machine both run this one, so they still agree to the bit."""
+    """``f`` with each division by a constant (the fixed parameters, compiled in: a cart's mass, the motor's constants) a multiplication by the
+    constant's reciprocal: a division costs the CPU several multiplications' time, and the cart's replay ran 13 % faster. Its results differ from
+    ``f``'s in their last bits only; the compiled replay and CasADi's virtual machine both run this one, so they still agree to the bit."""
     inputs, work = f.sx_in(), {}
     outputs = [ca.SX.zeros(f.sparsity_out(i)) for i in range(f.n_out())]
     for k in range(f.n_instructions()):
@@ -164,8 +156,7 @@ def _by_reciprocals(f: ca.Function) -> ca.Function:
 
 @lru_cache(maxsize=None)
 def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One whole sample for CasADi's virtual machine: :func:`_step`'s chunks as the compiled drivers run them
-    (the same operations: the same bits); its inputs without the observer's ``c``."""
+    """One whole sample for CasADi's VM: :func:`_step`'s chunks as the compiled drivers run them (same operations, same bits), without ``c``."""
     one, sub = _step(n_sub, free, fixed, observer), _chunk(n_sub)
     ins = [ca.SX.sym(one.name_in(i), one.sparsity_in(i)) for i in range(one.n_in())]
     s, V, t, h = ins[0], ins[1], ins[2], ins[-1]
@@ -191,9 +182,8 @@ def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
 
 
 def _load(source: str, name: str, flags: Sequence[str]):
-    """``pendulab_run`` of ``source`` compiled with ``flags`` and OpenMP, else without (the groups of sets one
-    after another: Apple's clang has no OpenMP), cached per machine; None if no compiler builds it or it does
-    not load here."""
+    """``pendulab_run`` of ``source`` compiled with ``flags`` and OpenMP, else without (the groups of sets one after another: Apple's clang has no
+    OpenMP), cached per machine; None if no compiler builds it or it does not load here."""
     for threads in (("-fopenmp",), ()):
         library = shared_library(source, name, flags=(*flags, *threads, *EXACT_MATH), salt=simd.salt(), kind="fit", prebuilt=False)
         if library is None:
@@ -210,9 +200,8 @@ def _load(source: str, name: str, flags: Sequence[str]):
 
 @lru_cache(maxsize=None)
 def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, single: bool = False):
-    """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`): in as many lanes as
-    :func:`pendulab.simd.lanes` says, :data:`WAYS` groups of them (``single``: one lane, for a lone parameter
-    set), for the machine's own vector width (else the baseline's); None without a working compiler."""
+    """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`): in :func:`pendulab.simd.lanes` lanes, :data:`WAYS` groups of
+    them (``single``: one lane, for a lone set), for the machine's own vector width (else the baseline's); None without a compiler."""
     tag = hashlib.sha256(repr((n_sub, free, fixed, observer)).encode()).hexdigest()[:10]
     name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
     source = _source(n_sub, free, fixed, observer, 1 if single else WAYS)
@@ -222,8 +211,7 @@ def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], obser
 
 
 def _split(vector: np.ndarray, free: Sequence[str] | None) -> tuple[tuple[int, ...], tuple[float, ...]]:
-    """``(free indices, fixed values)`` of a parameter vector: the key of its compiled replay (the same
-    for :func:`prepare` and :func:`replay`, so that a prepared library is the one a replay loads)."""
+    """``(free indices, fixed values)`` of a parameter vector: the key of its compiled replay, shared by :func:`prepare` and :func:`replay`."""
     names = PlantParameters.names()
     free_idx = tuple(range(len(names))) if free is None else tuple(names.index(n) for n in free)
     return free_idx, tuple(0.0 if i in free_idx else float(v) for i, v in enumerate(vector))
@@ -236,8 +224,7 @@ def sample_period(t: np.ndarray) -> float:
 
 
 def _key(vectors: np.ndarray, t: np.ndarray, free: Sequence[str] | None) -> tuple[tuple, np.ndarray, float]:
-    """What :func:`replay` and :func:`observe` share: the key of the compiled step (sub-steps, free, fixed), the
-    free parameters of every set (``(m, n_free)``, C order) and the sub-step."""
+    """For :func:`replay` and :func:`observe`: the compiled step's key (sub-steps, free, fixed), the sets' free parameters, the sub-step."""
     period = sample_period(t)
     n_sub = substeps(period, MAX_SUBSTEP)
     free_idx, fixed = _split(vectors[0], free)
@@ -249,8 +236,7 @@ def _pointer(a: np.ndarray):
 
 
 def _in_vm(one: ca.Function, x0: np.ndarray, per_sample: list, P: np.ndarray, h: float) -> list[np.ndarray]:
-    """Without a compiler: ``one`` over the log in CasADi's virtual machine, one set at a time; each of its
-    outputs as ``(m, n, size)``. ``per_sample``: the inputs between the state and the parameters, a column per sample."""
+    """Without a compiler: ``one`` in CasADi's VM, set by set, outputs ``(m, n, size)``; ``per_sample``: inputs between state and parameters."""
     n = per_sample[0].shape[1]
     f = one.mapaccum("in_vm", n)  # the state (first input, first output) carried from sample to sample
     rows = [f(x0, *per_sample, ca.repmat(ca.DM(theta), 1, n), ca.repmat(h, 1, n)) for theta in P]
@@ -285,11 +271,9 @@ def replay(params: list[PlantParameters] | np.ndarray, V: np.ndarray, t: np.ndar
     x0 : array (4,)
         State at ``t[0]``.
     restarts : dict, optional
-        ``{k: state}``: the replay continues from ``state`` at ``t[k]`` (before step ``k``); where the state's
-        speed is nan, from its positions with the replay's own speeds.
+        ``{k: state}``: the replay continues from ``state`` at ``t[k]`` (before step ``k``); a nan speed keeps the replay's own speeds.
     free : sequence of str, optional
-        The parameters that differ between the sets (default: all). The others take the first set's
-        values and are compiled in as constants, which makes the replay faster.
+        The parameters that differ between the sets (default: all). The others take the first set's values, compiled in as constants (faster).
 
     Examples
     --------
@@ -330,11 +314,10 @@ def observe(
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Outputs predicted one sample ahead by an observer of the plant, ``(m, n)`` (``(m, n, 2)`` for two outputs).
 
-    The replay of :func:`replay`, corrected after each sample towards the logged outputs ``y[k]`` (the
-    position ``(n,)``, or the position and the angle ``(n, 2)``): ``state <- predicted + gain @ (y[k] -
-    predicted outputs)`` with ``gain`` ``(4,)`` or ``(4, 2)`` (why: :mod:`pendulab.calibration._observer`).
-    ``gain = 0`` is the replay itself. With ``states=True`` the corrected states ``(m, n, 4)`` too (the observer's estimate
-    of the state after each sample). Arguments as :func:`replay`, with ``params`` an array ``(m, n_params)``.
+    The replay of :func:`replay`, corrected after each sample towards the logged outputs ``y[k]`` (the position ``(n,)``, or the position and the
+    angle ``(n, 2)``): ``state <- predicted + gain @ (y[k] - predicted outputs)`` with ``gain`` ``(4,)`` or ``(4, 2)`` (why:
+    :mod:`pendulab.calibration._observer`). ``gain = 0`` is the replay itself. With ``states=True`` the corrected states ``(m, n, 4)`` too (the
+    observer's estimate of the state after each sample). Arguments as :func:`replay`, with ``params`` an array ``(m, n_params)``.
 
     Examples
     --------

@@ -1,11 +1,7 @@
 """Starting values for the fit from the logs themselves, whatever their shape.
 
-The fit's search has local minima, and a start from the lab's defaults lands in a wrong one
-when the rig is far from them (three times the breakaway force, five times the slip drag). Two
-things any log of a moving cart shows, without recognising a ramp test:
-
-the drive and the drag from fast motion (:func:`drive_and_drag`), the breakaway force from the rests
-(:func:`breakaway_bounds`, :func:`breakaway_voltage`) and the slip region (:func:`slip_region`).
+From the lab's defaults the fit lands in a wrong minimum on a rig far from them (3 times the breakaway force, 5 times the slip drag). Any moving
+cart's log shows drive and drag (:func:`drive_and_drag`), the breakaway force (:func:`breakaway_voltage`) and the slip region (:func:`slip_region`).
 
 Examples
 --------
@@ -37,17 +33,15 @@ from pendulab.model.parameters import PlantParameters
 SMOOTHING = 0.03
 #: The fraction of moving samples (the fastest) that seeds the fit of the drive and the drag.
 SEED_FRACTION = 0.2
-#: ... and at least this share of the top speed (its 99.5th percentile): where most moving samples slide
-#: in the slip region (a calibrate ramp test on a rig of strong slip drag), its fastest fifth is still there.
+#: ... and at least this share of the top speed (99.5th percentile): on strong slip drag a ramp's fastest fifth is still in the slip region.
 SEED_SPEED_SHARE = 0.5
 
 
 def _motion(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:
-    """Speed, acceleration and voltage (clipped to the amplifier's range) of the logs, all through the same smoothing
-    filter, and whether the amplifier was below saturation; without each log's first and last smoothed samples.
+    """Speed, acceleration and voltage (clipped to the amplifier's range) of the logs, all through the same smoothing filter, and whether the
+    amplifier was below saturation; without each log's first and last smoothed samples.
 
-    (Savitzky-Golay, cubic.) The filter is linear, so the smoothed signals obey the same linear
-    equation as the raw ones: smoothing the acceleration but not the voltage would not (at a step).
+    (Savitzky-Golay, cubic: linear, so the smoothed signals obey the raw ones' equation; smoothing only the acceleration would not, at a step.)
     """
     out: list[list[np.ndarray]] = [[], [], [], []]
     for log in logs:
@@ -67,8 +61,7 @@ def _motion(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarra
 def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float, float] | None:
     """``(force_gain, Beq)`` from the fastest samples of the logs (None if too few move).
 
-    A cart that slides fast feels no stick-slip friction, so ``Mc*a = g*(K*V - b*v) - Beq*v`` there
-    (``K``, ``b``: the motor's force per volt and back-EMF damping at ``force_gain = 1``).
+    A cart sliding fast feels no stick-slip friction: ``Mc*a = g*(K*V - b*v) - Beq*v`` (``K``, ``b``: force per volt, back-EMF damping at ``g = 1``).
     """
     K, b = motor_constants(params.with_values(force_gain=1.0))
     v, a, V, unsaturated = _motion(logs, params)
@@ -79,9 +72,8 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     if np.count_nonzero(moving) < 50:
         return None
     A, y, speed = A[moving], y[moving], speed[moving]
-    # Seeded by the fastest samples (past any slip region), grown to every sample the seed's answer
-    # explains: the accelerations that tell the drive from the drag, but not the slip region's drag.
-    # A weak ridge towards params0 holds the scale where only cruising (a = 0, just the ratio) is seen.
+    # Seeded by the fastest samples (past any slip region), grown to every sample the seed's answer explains: the accelerations that tell the drive
+    # from the drag, but not the slip region's drag. A weak ridge towards params0 holds the scale where only cruising (a = 0, just the ratio) is seen.
     prior = np.array([params.force_gain, params.Beq])
     scale = np.sqrt(np.mean(A**2, axis=0)) + 1e-12
     use = speed >= max(np.quantile(speed, 1.0 - SEED_FRACTION), SEED_SPEED_SHARE * np.quantile(speed, 0.995))
@@ -102,9 +94,8 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
 def breakaway_bounds(logs: Sequence[RampLog], step: float) -> tuple[float | None, float | None]:
     """``(held, broke)``: the largest voltage the cart held through a rest, and the smallest at which it broke away.
 
-    A stuck cart feels no back-EMF, so ``F1`` lies between ``gain K held`` and ``gain K broke``. Where
-    the cart broke away, the voltage reached just before it moved is an upper bound whether it rose
-    slowly or jumped there. None where the logs show no such rest.
+    A stuck cart feels no back-EMF, so ``F1`` lies between ``gain K held`` and ``gain K broke``. Where the cart broke away, the voltage reached just
+    before it moved is an upper bound whether it rose slowly or jumped there. None where the logs show no such rest.
     """
     from pendulab.calibration._polish import rest_samples, rests
 
@@ -130,9 +121,8 @@ def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
 
 
 def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParameters:
-    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs,
-    and ``B`` and ``v2`` where they show the slip region (:func:`slip_region`; ``F2`` then at least the
-    force the cart slid under, :func:`slipping_force`).
+    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs, and ``B`` and ``v2`` where they show the slip
+    region (:func:`slip_region`; ``F2`` then at least the force the cart slid under, :func:`slipping_force`).
 
     What the logs cannot show keeps ``params0``'s value; logs with the pendulum keep ``params0``.
     """
@@ -151,7 +141,6 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
         slip = slip_region(logs, driven)
         if slip is not None:
             values.update(B=slip[0], v2=slip[1], v1=min(params0.v1, 0.5 * slip[1]))
-            # F2 at least the force the cart slid under (a start below it leaves the slip region too early).
             pushed = slipping_force(logs, driven, slip[0], slip[1])
             if pushed is not None:
                 values["F2"] = max(values.get("F2", params0.F2), pushed)
@@ -163,8 +152,7 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
 
 
 def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[np.ndarray, ...]:
-    """Over the logs (without the smoothing's edges): ``|v|``, the friction ``R`` each sample needed (see
-    :func:`slip_region`; signed along ``v``), the motor's force ``|gain*(K*V - b*v)|`` and ``|Mc*a|``."""
+    """Over the logs: ``|v|``, the friction ``R`` each sample needed (:func:`slip_region`; along ``v``), ``|gain*(K*V - b*v)|`` and ``|Mc*a|``."""
     K, b = motor_constants(params.with_values(force_gain=1.0))
     v, a, V, _ = _motion(logs, params)
     motor, inertia = params.force_gain * (K * V - b * v), params.lumped_cart_mass * a
@@ -172,15 +160,13 @@ def _friction_needed(logs: Sequence[RampLog], params: PlantParameters) -> tuple[
 
 
 def _sliding_speed(params: PlantParameters) -> float:
-    """The speed (m/s) above which a sample slides for the slip region's reading: faster than the encoder's
-    quantization can fake through the smoothing window."""
+    """The speed (m/s) above which a sample slides for the slip region's reading: faster than encoder quantization can fake through the smoothing."""
     return max(2e-3, 5.0 * float(params.q_x) / SMOOTHING)
 
 
 def slipping_force(logs: Sequence[RampLog], params: PlantParameters, B: float, v2: float) -> float | None:
-    """The largest motor force (its 90th percentile) the cart slid under in the slip region (drag ``B``
-    below ``v2``): a lower bound of ``F2``, since the slip region ends where the motor's force passes it.
-    None where fewer than 20 samples slid there."""
+    """The largest motor force (its 90th percentile) the cart slid under in the slip region (drag ``B`` below ``v2``): a lower bound of ``F2``, since
+    the slip region ends where the motor's force passes it. None where fewer than 20 samples slid there."""
     v, R, motor, inertia = _friction_needed(logs, params)
     # Sliding steadily (the inertia a tenth of the drive at most) with the slip region's drag, within a factor 2.
     slipping = (v > _sliding_speed(params)) & (v < v2) & (R > 0.5 * B * v) & (R < 2.0 * B * v) & (inertia <= 0.1 * motor)
@@ -194,12 +180,10 @@ SLIP_BANDS = 20
 def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float, float] | None:
     """``(B, v2)``, the slip region's drag and end speed, read off the logs (None if they show none).
 
-    With the drive and ``Beq`` of ``params`` (:func:`drive_and_drag`), what the friction must have been
-    at each sample is ``R = gain*(K*V - b*v) - Beq*v - Mc*a``: the motor's force while stuck, ``B*v``
-    in the slip region, 0 beyond it. Over bands of speed, ``R/v`` is ``B`` up to ``v2`` and 0 above:
-    ``B`` is its median over the bands where it stands clearly above 0, ``v2`` the speed that best splits
-    the samples of the last of those and the next band into drag ``B`` and none. A log that never leaves the slip region (or never enters it) shows ``R/v`` near 0
-    everywhere: None.
+    With the drive and ``Beq`` of ``params`` (:func:`drive_and_drag`), the friction each sample needed is ``R = gain*(K*V - b*v) - Beq*v - Mc*a``: the
+    motor's force while stuck, ``B*v`` in the slip region, 0 beyond. Over bands of speed ``R/v`` is ``B`` up to ``v2``, 0 above: ``B`` is its median
+    over the bands clearly above 0, ``v2`` the speed best splitting the samples of the last of those and the next band into drag ``B`` and none. A log
+    that never leaves the slip region (or never enters it): None.
     """
     _, b = motor_constants(params.with_values(force_gain=1.0))
     v, R, *_ = _friction_needed(logs, params)
@@ -215,8 +199,7 @@ def slip_region(logs: Sequence[RampLog], params: PlantParameters) -> tuple[float
     if not np.any(slip) or np.all(slip):
         return None
     B = float(np.median(ratio[slip]))
-    # v2: in the last slip band and the next, the speed that best splits the samples whose drag is B
-    # (R/v above B/2) from those beyond (fewest on the wrong side).
+    # v2: in the last slip band and the next, the speed best splitting the samples with drag B (R/v above B/2) from those beyond (fewest misplaced).
     last = int(np.flatnonzero(slip)[-1])
     near = (band >= last) & (band <= last + 1)
     order = np.argsort(v[near], kind="stable")

@@ -1,38 +1,27 @@
 """Friction vector ``[F1, v1, F2, v2, B]`` from a ramp-test log (SPEC §8).
 
-The log is cut into pushes by its voltage alone, so logs of the real rig, of the virtual rig and of
-other tools are read the same way: a *push* starts where the voltage leaves 0 as a ramp
-(``V = rate * (t - t0)``) and ends where it returns to 0 (the *release*). A ramp slower than
-10 V/s is a breakaway ramp, a steeper one an ``F2`` probe (see :mod:`pendulab.calibration.ramp`).
+The log is cut into pushes by its voltage alone, so logs of the real rig, of the virtual rig and of other tools are read the same way: a *push* starts
+where the voltage leaves 0 as a ramp (``V = rate * (t - t0)``) and ends where it returns to 0 (the *release*). A ramp slower than 10 V/s is a
+breakaway ramp, a steeper one an ``F2`` probe (see :mod:`pendulab.calibration.ramp`).
 
 What is measured, per push
 --------------------------
 ``F1``
-    Motor force when the cart starts to move on a slow ramp: ``F1 = K * |V|`` at the last sample
-    before the position leaves its resting value (``K`` = motor force per volt at rest, from the
-    CasADi model, ``xdot = 0`` so there is no back-EMF).
+    Motor force when the cart starts to move on a slow ramp: ``F1 = K * |V|`` (``K``: :func:`motor_constants`) at the last sample before it moves.
 ``v2``, ``B``, ``v1`` (and ``Beq``)
-    After a release the voltage is 0 and the speed decays in three exponentials: above ``v2`` with
-    ``(Beq + b)/Mc`` (``b`` the back-EMF damping), between ``v2`` and ``v1`` with ``(Beq + b + B)/Mc``
-    (the strong drag), and below ``v1``, stuck, with ``Beq/Mc``. The closed form of this coasting
-    motion is fitted to the logged positions (least squares, so encoder steps average out): ``v2`` is
-    the highest speed of the strong-drag phase, ``B`` comes from its decay rate and ``v1`` is the
-    speed under which the cart sticks.
+    After a release (0 V) the speed decays in three exponentials: above ``v2`` with ``(Beq + b)/Mc`` (``b`` the back-EMF damping), between ``v2`` and
+    ``v1`` with ``(Beq + b + B)/Mc`` (the strong drag), and below ``v1``, stuck, with ``Beq/Mc``. Their closed form is fitted to the logged positions
+    (least squares, averaging encoder steps): ``v2`` is the strong-drag phase's top speed, ``B`` from its decay, ``v1`` where the cart sticks.
 ``F2``
-    On a steep probe the force outruns the speed: the cart leaves the drag regime when the motor
-    force passes ``F2``. The probe is simulated with the CasADi plant (the other friction values as
-    measured) for candidate ``F2`` and the best match to the logged positions is kept. If the fit
-    cannot tell (the cart left the drag regime by its speed), that probe gives no ``F2``.
+    On a steep probe the force outruns the speed: the cart leaves the drag regime when the motor force passes ``F2``. The probe is simulated (the rest
+    as measured) for candidate ``F2``, the best match to the logged positions kept; one that left the drag regime by its speed gives no ``F2``.
 
 Mass ratio
 ----------
-The ramp test runs with the pendulum removed; the pendulum's weight presses the cart harder onto its
-track and gear, and the stick-slip forces grow with that normal force. The forces ``F1`` and ``F2``
-are therefore multiplied by ``mass_ratio = (M_cart + Mp) / M_cart`` (see :func:`mass_ratio`; 1.40 for
-the long pendulum on the IP02). Speeds ``v1``, ``v2`` and the drag coefficient ``B`` are not scaled.
+The ramp test runs with the pendulum removed; its weight presses the cart onto its track and gear, and the stick-slip forces grow with that normal
+force: ``F1`` and ``F2`` are multiplied by :func:`mass_ratio` (1.40 for the long pendulum on the IP02), not ``v1``, ``v2``, ``B``.
 
-All estimates are averaged over the iterations (both directions); the spread is their standard
-deviation.
+All estimates are averaged over the iterations (both directions); the spread is their standard deviation.
 
 Examples
 --------
@@ -190,9 +179,8 @@ def _find_pushes(log: RampLog) -> list[_Push]:
 def _onset_voltage(t: np.ndarray, V: np.ndarray, x: np.ndarray, x_rest: float, direction: int, j: int, k: int) -> float:
     """Voltage when the cart started to move.
 
-    The first encoder step shows only after the cart has crept half a step; the displacement grows
-    like ``c (t - t0)^2`` from the onset ``t0`` (constant force excess or force ramp), so a parabola
-    fitted to the first steps dates the onset. Falls back to the last sample at rest.
+    The first encoder step shows only after the cart has crept half a step; the displacement grows like ``c (t - t0)^2`` from the onset ``t0``
+    (constant force excess or force ramp), so a parabola fitted to the first steps dates the onset. Falls back to the last sample at rest.
     """
     lo = max(0, j - 20)
     tt, d = t[lo : k + 1], direction * (x[lo : k + 1] - x_rest)
@@ -260,8 +248,7 @@ def _fit_coast(t: np.ndarray, x: np.ndarray, direction: int, u_guess: float, Mc:
 
 # ---------------------------------------------------------------------- F2 probe fit
 def _fit_F2(log: RampLog, lo: int, hi: int, params: PlantParameters, F_low: float, F_high: float) -> float | None:
-    """Best ``F2`` in ``[F_low, F_high]`` for the samples ``lo:hi`` (cart at rest at ``lo``), by a coarse-to-fine
-    grid (see the module docstring); ``None`` if it is not much better than ``F2 = F_high``."""
+    """Best ``F2`` in ``[F_low, F_high]`` for samples ``lo:hi`` from rest, on a coarse-to-fine grid; ``None`` if barely better than ``F_high``."""
     from pendulab.calibration._replay import replay
     from pendulab.calibration.fit import DEFAULT_FIT
 
@@ -298,14 +285,11 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
     Parameters
     ----------
     log : RampLog
-        A log of :func:`~pendulab.calibration.ramp.run_ramp_test` (or any log with slow voltage
-        ramps from rest and releases to 0 V).
+        A log of :func:`~pendulab.calibration.ramp.run_ramp_test` (or any log with slow voltage ramps from rest and releases to 0 V).
     mass_ratio : float
-        Factor on ``F1`` and ``F2`` for the pendulum's weight (:func:`mass_ratio`); 1 keeps the
-        vector as measured with the pendulum removed.
+        Factor on ``F1`` and ``F2`` for the pendulum's weight (:func:`mass_ratio`); 1 keeps the vector as measured with the pendulum removed.
     params : PlantParameters, optional
-        Nominal cart parameters (motor constants, lumped mass); their friction values fill entries
-        the log cannot show (noted in ``notes``). Default: IP02 cart, pendulum removed.
+        Nominal cart parameters (motor constants, lumped mass), whose friction fills what the log cannot show (``notes``); default: IP02 cart alone.
 
     Raises
     ------
@@ -349,7 +333,6 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
         # A cart that moved only after the release did not break away on the ramp itself.
         F1 = K * abs(_onset_voltage(t, V, x, x_rest, direction, j, k)) if kind == "ramp" and j < push.release - 1 else None
         onsets[push.start] = j
-        # Coasting after the release (voltage 0 until the next push).
         values: dict[str, float | None] = {"v1": None, "v2": None, "B": None, "Beq": None}
         rms = None
         r = push.release
@@ -382,8 +365,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
             notes.append(f"{name} not observed (no coasting phase showed it); kept the nominal {measured[name]:g}")
     measured["v1"] = min(measured["v1"], measured["v2"])
 
-    # F2: simulate pushes with everything else as measured. A slow ramp shows F2 only when the
-    # drag regime ends by force before it ends by speed, i.e. when F2 < v2 (B + Beq) (quasi-static).
+    # F2: pushes simulated with the rest as measured. A slow ramp shows it only where the drag regime ends by force first: F2 < v2 (B + Beq).
     fit_params = params.with_values(**{n: measured[n] for n in ("F1", "v1", "v2", "B")}, Beq=measured.get("Beq", params.Beq), F2=measured["F1"])
     F2_crit = fit_params.v2 * (fit_params.B + fit_params.Beq)
     found: dict[str, list[float]] = {"ramp": [], "probe": []}

@@ -6,22 +6,16 @@ A calibration file is human-editable JSON::
       "format": "pendulab-calibration",
       "version": 1,
       "friction": {"F1": 1.5, "v1": 0.005, "F2": 3.0, "v2": 0.05, "B": 20.0},
-      "Beq": 4.3,                 # optional fitted parameters
-      "force_gain": 1.0,
-      "M_cart": 0.57,
+      "Beq": 4.3, "force_gain": 1.0, "M_cart": 0.57,   # optional fitted parameters
       "metadata": {"date": "...", "rig": "...", "iterations": 5, "spread": {...}, "method": "..."}
     }
 
-The friction vector is the one the model uses as it stands (:meth:`Calibration.apply` copies it into
-the plant parameters unchanged). ``pendulab calibrate`` writes it already scaled for the pendulum's
-weight and keeps the vector measured with the pendulum removed in ``metadata.measured_friction``.
+The friction vector is the one the model uses (:meth:`Calibration.apply` copies it into the plant parameters unchanged). ``pendulab calibrate`` writes
+it already scaled for the pendulum's weight and keeps the vector measured with the pendulum removed in ``metadata.measured_friction``.
 
-Loading also accepts the old lab's MATLAB ``.mat`` file (MAT v5 or v7.3) holding a friction vector:
-the variable named like ``friction``/``fric`` (case-insensitive), else the only numeric vector with 4
-or 5 entries, whatever its name (the lab used ``defaultData`` and ``measuredData``). Four numbers are
-read as the old lab's static-friction function read them, ``[F1, v1, B, unused]`` with
-``F2 = 4 F1`` and ``v2 = 0.1 m/s`` fixed (SPEC §8); five are pendulab's ``[F1, v1, F2, v2, B]``. An
-empty file is one clear error.
+Loading also accepts the old lab's MATLAB ``.mat`` file (MAT v5 or v7.3) holding a friction vector: the variable named like ``friction``/``fric``
+(case-insensitive), else the only numeric vector with 4 or 5 entries, whatever its name. Four numbers are read as the old lab's static-friction
+function read them, ``[F1, v1, B, unused]`` with ``F2 = 4 F1`` and ``v2 = 0.1 m/s`` fixed (SPEC §8); five are pendulab's ``[F1, v1, F2, v2, B]``.
 
 Examples
 --------

@@ -1,41 +1,30 @@
 """Least-squares refit of the friction vector, ``Beq`` and the force gain from logs (SPEC §8).
 
-The logged voltage is replayed through the CasADi plant and the parameters are chosen to minimize
-the squared error to the logged positions (and angles, for logs with the pendulum).
+The logged voltage is replayed through the CasADi plant, with the parameters that minimize the squared error to the logged positions (and angles).
 
 Method
 ------
-*Model.* :func:`pendulab.model.plant.plant_equations` under the true (switching) stick-slip law, compiled to C
-(:mod:`pendulab.calibration._replay`), several parameter sets at once. A search finds the basin, a polish on the true
-law's replay the answer, and a check replays the whole logs with it. Every decision between answers compares their
-replay errors (:func:`pendulab.calibration._polish.replay_errors`: their cost on what was searched, their RMS on the whole logs).
+*Model.* :func:`pendulab.model.plant.plant_equations` under the true stick-slip law, compiled to C (:mod:`pendulab.calibration._replay`), several
+parameter sets at once; every decision between answers compares their replay errors (:func:`pendulab.calibration._polish.replay_errors`).
 
-*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on the one-sample prediction
-errors of an observer of the replay (the replay itself is a needle as an objective), from the start (:func:`ramp_start`,
-one rule for the Python API and ``pendulab fit``) and, the cart alone, the logs' own estimate (:mod:`pendulab.calibration._start`).
-Long logs are searched on at most :data:`STAGE_SECONDS` of them (:data:`PIECE_SECONDS` windows where the cart stops and
-starts most). An upright pendulum's replay restarts from the observer's state estimates, each settled to replay its
-stretch best (:func:`pendulab.calibration._polish.settled`). ``regularization`` adds a weak prior, ``(p/p0 - 1)^2 / 2``
-per parameter: what the logs cannot show keeps its start.
+*Stage 1, the observer search* (:mod:`pendulab.calibration._observer`): Levenberg-Marquardt on an observer's one-sample prediction errors, from the
+start (:func:`ramp_start`) and, the cart alone, the logs' own estimate (:mod:`pendulab.calibration._start`). Long logs: at most :data:`STAGE_SECONDS`
+of them (:func:`_pieces`). An upright pendulum's replay restarts from the observer's estimates, each settled (:func:`_polish.settled`).
+``regularization`` adds a weak prior, ``(p/p0 - 1)^2 / 2`` per parameter: what the logs miss keeps its start.
 
-*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law, which decides whether a push
-breaks the cart away at all: scans of the thresholds, a pattern search, scans along what slow logs confuse (the common scale
-of the gain, forces and drags; the drag's split between ``B`` and ``Beq``) and walks along the slip region's corner ``F2, v2``;
-the cart alone, the global search, CMA-ES from the observer search's answer (:func:`_evolved`); where the answer still misses,
-CMA-ES around it, the thresholds rescanned (:func:`_rescanned`) and CMA-ES from the start; where the cart stays in the slip
-region, a search along the common scale (:func:`_in_the_slip_region_only`); a voltage logged a sample early or late
-(:data:`LAG_ABOVE_STEPS`). A noisy logged voltage is replayed denoised (:func:`_voltage_shift` floors the uncertainties).
+*Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law: scans of the thresholds and along what slow logs confuse
+(the common scale of gain, forces and drags; the drag's ``B``/``Beq`` split), a pattern search, walks along the corner ``F2, v2``; CMA-ES
+(:func:`_evolved`, :func:`_rescanned`); the common scale where the cart stays in the slip region (:func:`_in_the_slip_region_only`); a voltage logged
+a sample off (:data:`LAG_ABOVE_STEPS`). A noisy logged voltage is replayed denoised (:func:`_voltage_shift` floors the uncertainties).
 
-*Check.* The whole logs are replayed with the answer, restarted only where the log gives the state (each rest of the
-cart; an upright pendulum every 0.25 s from the fit's state estimate); the RMS and largest position error are reported
-and stored in the calibration file. A few stretches whose replay diverges are named and left out (:data:`DIVERGED_SHARE`).
-``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than :attr:`FitResult.forward_limit`.
+*Check.* The whole logs are replayed with the answer, restarted only where the log gives the state (each rest of the cart; an upright pendulum every
+0.25 s); the RMS and largest position error are reported and stored in the calibration file. A few stretches whose replay diverges are left out
+(:data:`DIVERGED_SHARE`). ``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than :attr:`FitResult.forward_limit`.
 
-*What the logs determine* (:func:`pendulab.calibration._polish.profile`): a replay cost that rises by one effective
-chi-square unit both ways along a parameter (and along the common scale and the drag split) makes it *determined*, one
-way only *bounded*, flat *not identified* (it keeps its start value); ``v1`` is at most bounded (:data:`V1_SCATTER`); a
-log whose replay stays in the slip region shows ``B + Beq``, not its split (:func:`split_of_the_drag`). The calibration
-file says which (``metadata.determination``); a log that determines nothing is refused.
+*What the logs determine* (:func:`pendulab.calibration._polish.profile`): a replay cost rising by one effective chi-square unit both ways along a
+parameter makes it *determined*, one way only *bounded*, flat *not identified* (it keeps its start); ``v1`` is at most bounded (:data:`V1_SCATTER`); a
+replay staying in the slip region shows ``B + Beq``, not its split (:func:`split_of_the_drag`). The calibration file says which
+(``metadata.determination``); logs that determine nothing are refused.
 
 Examples
 --------
@@ -83,8 +72,7 @@ _UPPER = {"F1": 50.0, "v1": 1.0, "F2": 50.0, "v2": 2.0, "B": 2000.0, "Beq": 200.
 
 
 class _LogEstimate(NamedTuple):
-    """One whole log after the search: its state estimates every ``stride`` samples (the smoothed log; the
-    observer's with the pendulum), the observer's one-sample predictions and its measurement noise."""
+    """A whole log after the search: state estimates each ``stride`` (smoothed, or the observer's with a pendulum), one-sample predictions, noise."""
 
     log: RampLog
     used: int
@@ -160,8 +148,7 @@ class FitResult:
     def where_it_misses(self, window: float = 0.5) -> str:
         """Where the forward simulation misses the logs worst: the log, the time, the signal and its error there.
 
-        The cart's position is what the check compares; its error's RMS over ``window`` seconds is largest
-        around the time named (a replay that diverged is named where it did).
+        The cart position's RMS error over ``window`` seconds is largest around the time named (a replay that diverged: where it did).
 
         Examples
         --------
@@ -189,9 +176,8 @@ class FitResult:
     def to_calibration(self, **metadata: Any) -> Calibration:
         """A calibration file's content: the full friction vector (fitted or kept) and the fitted extras.
 
-        ``metadata["determination"]`` says for each fitted parameter whether the logs determined it,
-        bounded it (``allowed_range``; no uncertainty) or did not identify it (it then holds its start
-        value, listed in ``kept_start_value``).
+        ``metadata["determination"]`` says for each fitted parameter whether the logs determined it, bounded it (``allowed_range``; no uncertainty) or
+        did not identify it (it then holds its start value, listed in ``kept_start_value``).
         """
 
         def finite(v: float) -> float | None:  # JSON has no infinity
@@ -253,23 +239,20 @@ def _range_text(low: float, high: float) -> str:
     return f"{low:.4g} to {high:.4g}" if low > 0 else f"<= {high:.4g}"
 
 
-#: A fit is rejected when its forward simulation misses the logs (RMS) by more than this many encoder
-#: steps: the true values miss by about one, good fits by 1 to 12, values 16 % off or wrong units by hundreds.
+#: Largest forward-simulation RMS (encoder steps) of an accepted fit: the true values miss by 1, good fits by 1 to 12, values 16 % off by hundreds.
 FORWARD_LIMIT_STEPS = 20.0
 #: Above this forward-simulation RMS (encoder steps) no parameter is reported determined (:func:`confidence_of`): a slow-ramp
 #: fit stopped at 4.5 steps (Beq +780 %) had a profile calling Beq determined to a few per cent; good fits replay within 0.9-2.5.
 CONFIDENT_STEPS = 3.0
 
 
-#: A stretch between restarts whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway that a hair of drive decides (on 300 s
-#: of random steps with 10 mV of voltage noise, the true values in 1.2 % of the samples). Up to this share of the samples such stretches are named and
-#: left out of the check (:func:`_diverged`); more, and they count. One stretch may be 3 % of a short log (16 s of random steps: 1 of 27 stretches).
+#: A stretch whose replay misses by more than FORWARD_LIMIT_STEPS has diverged: a breakaway a hair of drive decides (300 s of random steps, 10 mV of
+#: voltage noise: the true values in 1.2 % of the samples). Up to this share of the samples, they are left out of the check (:func:`_diverged`).
 DIVERGED_SHARE = 0.05
 
 
 def _diverged(errors: np.ndarray, stretch: np.ndarray, limit: float) -> np.ndarray:
-    """The samples of the stretches (``stretch``: each error's) whose RMS error exceeds ``limit`` (or is not finite),
-    if they are at most :data:`DIVERGED_SHARE` of the samples; else none.
+    """Samples of stretches (``stretch`` marks them) with RMS error over ``limit`` or not finite, if at most :data:`DIVERGED_SHARE`; else none.
 
     >>> stretch = np.repeat([0, 1, 2], [60, 37, 3])
     >>> int(_diverged(np.where(stretch == 2, 1.0, 0.0), stretch, 0.5).sum()), int(_diverged(np.where(stretch == 1, 1.0, 0.0), stretch, 0.5).sum())
@@ -281,9 +264,8 @@ def _diverged(errors: np.ndarray, stretch: np.ndarray, limit: float) -> np.ndarr
 
 
 def _noise_level(x: np.ndarray) -> float:
-    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12). Their spread is
-    the robust one (from the median) where the motion's own curvature inflates their standard deviation: at 100 Hz
-    it read 99 um for 10 um of noise, and the rests, within 6 of it, held a cart at 80 mm/s (no 1 kHz log's is lower)."""
+    """Rough measurement noise (m): from second differences, at least an encoder step / sqrt(12). The robust spread (from the median) where the
+    motion's own curvature inflates their standard deviation (at 100 Hz: 99 um for 10 um of noise)."""
     d = np.diff(x, 2)
     spread = min(float(np.std(d)), 1.4826 * float(np.median(np.abs(d - np.median(d)))))
     return max(spread / math.sqrt(6), encoder_step(x) / math.sqrt(12), 1e-6)
@@ -302,8 +284,8 @@ def _initial_states(log: RampLog, with_pendulum: bool) -> np.ndarray:
     return np.column_stack(smoothed(log.x) + (smoothed(log.alpha) if with_pendulum else []))  # a pendulum's log has alpha (_check_logs)
 
 
-#: At most this many rounds of scans along the joint directions and polish (the first whatever the cost), while one
-#: lowers the cost by SCAN_GAIN and the replay misses by more than SCAN_ABOVE_STEPS encoder steps (the issue's bar).
+#: At most this many rounds of scans along the joint directions and polish (the first whatever the cost: on the unseen rig's slow ramps, from 1.17
+#: steps to 0.88), while one lowers the cost by SCAN_GAIN and the replay misses by more than SCAN_ABOVE_STEPS encoder steps (the issue's bar).
 SCAN_CYCLES = 3
 SCAN_GAIN = 0.02
 SCAN_ABOVE_STEPS = 2.0
@@ -316,10 +298,8 @@ SCALE_STEPS = 3
 V1_SCATTER = 1.3
 #: One walk along the valley of v2 and F2 (:func:`_polish.walk`) is polished from if it lowers the cost by this share.
 WALK_GAIN = 0.01
-#: Above this replay RMS (encoder steps) the answer goes through CMA-ES around it (:func:`_evolved`), each seed while it still misses: the
-#: sticky rig's chirp stopped at 1.83 steps with v2 and B called determined 3.4 and 3.9 % off; so, 1.37 steps and both within 0.3 %.
-#: Which seed finds the basin is a lottery: from the rescanned estimate of the sticky rig's slow ramps (:func:`_rescanned`) seeds 19 to 26
-#: reached 0.8e6 (none), 0.8e6, 7.7e5, 9.1e4, 6.9e5, 0.8e6, 1.5e5, 4.7e5 (with LAPACK's eigenvectors, seed 19: 4.4e4); four seeds, not two.
+#: Above this replay RMS (encoder steps) the answer goes through CMA-ES around it (:func:`_evolved`), each seed while it misses (the sticky rig's
+#: chirp: 1.83 steps, v2 3.4 % off; so, 1.37 and 0.3 %). Which seed finds the basin is luck (seeds 19-26 on its slow ramps: 9.1e4 to 0.8e6).
 EVOLVE_ABOVE_STEPS = 1.5
 EVOLVE_SEEDS = (19, 20, 21, 22)
 #: Pattern-search steps of the polish, and the samples it may replay (parameter sets x samples; about 0.5 us each):
@@ -336,18 +316,16 @@ RESCAN_POINTS = 64
 RESCAN_ROUNDS = 2
 RESCAN_F2 = 2.0
 GLOBAL_SEEDS = (1, 2, 3, 4)
-#: The global search (the cart alone): CMA-ES from the observer search's answer, AROUND_SIGMA (log units) either way, AROUND_GENERATIONS generations
-#: (:func:`_evolved`), then from the polished answer if that found nothing lower. The local stages stop in the thresholds' staircase: the unseen
-#: rig's slow ramps at the gain -6.6 % (0.70 steps); so, -1.6 % (0.55). A 25 s log of them: from the search's answer nothing, from the polished -1.8 %.
+#: The global search (the cart alone, :func:`_evolved`): CMA-ES from the observer search's answer, then the polished, AROUND_SIGMA (log units) either
+#: way for AROUND_GENERATIONS generations: local stages stop in the thresholds' staircase (unseen rig's slow ramps: gain -6.6 %; so -1.6 %).
 AROUND_SIGMA = 0.3
 AROUND_GENERATIONS = 200
 AROUND_SEED = 1
 GLOBAL_SIGMA = 1.0
 GLOBAL_GENERATIONS = 200
-#: A logged voltage may lead or lag what the motor got (loggers differ). Where the answer misses by more than LAG_ABOVE_STEPS, a shift :func:`_voltage_lag`
-#: finds (LAG_PROBE_ITER observer iterations) is fitted again (then probed a sample further, up to MAX_LAG), kept if the logs replay within LAG_KEEP
-#: times the answer's RMS. Random steps and a chirp logged a sample off missed by 2.9-4.9 steps; the right shift cost 0.54-0.73 times, the wrong
-#: one 1.8-2.4, logs without a lag 1.0-2.0; fitted shifted, 0.7-0.8 steps.
+#: A logged voltage may lead or lag what the motor got. Where the answer misses by over LAG_ABOVE_STEPS, a shift :func:`_voltage_lag` finds
+#: (LAG_PROBE_ITER observer iterations) is fitted again (then a sample further, up to MAX_LAG), kept if the logs replay within LAG_KEEP times the
+#: answer's RMS. Random steps and a chirp logged a sample off: the right shift cost 0.54-0.73 times, the wrong one 1.8-2.4 (no lag: 1.0-2.0).
 LAG_ABOVE_STEPS = 2.0
 LAG_PROBE_ITER = 8
 LAG_GAIN = 0.9
@@ -365,16 +343,12 @@ FIRST_AT_REST = 1e-3
 #: A log whose cart is faster than this (m/s) at its first sample starts moving: its first state is settled (:func:`_observer_search`). A cart
 #: breaking away there shows 0.01-0.015 m/s (the smoothing's edge): settled at the search's values, a triangle wave's answer replayed 24 steps off.
 MOVING_START = 0.1
-#: The start and the observer search's answer are rounded to this many significant digits before the searches on the replay
-#: (:func:`pendulab.exact.significant`): they came through OpenBLAS, whose kernels differ by CPU. With the start 1e-16 and the
-#: observer's answer 2.5e-11 apart (and CMA-ES's state unrounded: :func:`_polish.evolve`), the unseen rig's 16 s of slow ramps
-#: fitted F2 +145 % with this machine's kernels and +62 % with the SSE3 ones (OPENBLAS_CORETYPE=Prescott).
+#: The start and the observer search's answer are rounded to this many significant digits (:func:`pendulab.exact.significant`) before the replay
+#: searches: OpenBLAS differs by CPU (unrounded, 1e-16 and 2.5e-11 apart, the unseen rig's slow ramps fitted F2 +145 % here, +62 % with SSE3).
 START_DIGITS = 7
-#: A minimum another search stage found (:func:`_rival`) that replays the searched logs within :data:`_polish.RANGE_COST_RATIO` times the
-#: answer's cost lies within this many of each determined parameter's uncertainties, and within its range; where it is more than
-#: RIVAL_APART (relative) away, the logs do not tell the two apart and the parameter is only bounded. The random steps of the light-drag
-#: rig replayed at 0.63 steps with F2 -18.7 % and B +5.6 % "determined" to 3 %, while the polished answer before CMA-ES, at 1.08 times
-#: its cost, had F2 +0.5 % (the rig's own values replay at 0.66 steps).
+#: A minimum another stage found (:func:`_rival`) that replays the searched logs within :data:`_polish.RANGE_COST_RATIO` times the answer's cost lies
+#: within this many of each determined parameter's uncertainties, and within its range; more than RIVAL_APART (relative) away, the logs do not tell
+#: the two apart: the parameter is only bounded (light-drag random steps: F2 -18.7 % "determined" to 3 %, a rival at 1.08 times the cost +0.5 %).
 RIVAL_SIGMAS = 2.0
 RIVAL_APART = 0.1
 #: Points of a scan in one batched replay (one compiled batch: 16 parameter sets).
@@ -382,20 +356,17 @@ SCAN_POINTS = 16
 #: The searches see at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
 STAGE_SECONDS = 20.0
 PIECE_SECONDS = 4.0
-#: Logs longer than STAGE_SECONDS: CMA-ES (:func:`_evolved`) and the search along the common scale (:func:`_in_the_slip_region_only`)
-#: replay at most this much of them (s), in pieces chosen as for STAGE_SECONDS; what they find is polished on all the polish sees.
-#: Issue 19's time bar: a 25 s log of slow ramps took 14 times one pure-Python simulation of it, the two CMA-ES runs 17 and the scale
-#: 8 of its 37 CPU seconds. Not for shorter logs: on the 16 s development corpus CMA-ES on 8 s of pieces met the bar on 19 of 22
-#: cases instead of 21 (the unseen rig's ramps and triangle wave, Beq +5.4 %; the sticky rig's chirp, F2 -20 % called determined).
+#: Logs longer than STAGE_SECONDS: CMA-ES (:func:`_evolved`) and the search along the common scale (:func:`_in_the_slip_region_only`) replay at most
+#: this much of them (s), in pieces chosen as for STAGE_SECONDS; what they find is polished on all the polish sees. Issue 19's time bar: on a 25 s
+#: slow-ramp log they took 25 of 37 CPU seconds. Not for shorter logs (16 s corpus: the bar met on 19 of 22 cases instead of 21).
 SEARCH_SECONDS = 8.0
 
 
 def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int], seconds: float | None = None) -> list[tuple[RampLog, int, int]]:
     """``(piece, index of its log, first sample)`` for the searches: whole logs if they are short.
 
-    Longer logs give the PIECE_SECONDS windows where the cart stops and starts most often, then
-    travels most (breakaways and sticking tell the friction apart; a long rest tells little), up to
-    ``seconds`` (default STAGE_SECONDS) in all, not overlapping, each starting on a state estimate of its log.
+    Longer logs give the PIECE_SECONDS windows where the cart stops and starts most often, then travels most (breakaways and sticking tell the
+    friction apart), up to ``seconds`` (default STAGE_SECONDS) in all, not overlapping, each starting on a state estimate of its log.
     """
     seconds = STAGE_SECONDS if seconds is None else seconds
     if sum(log.duration for log in logs) <= seconds * 1.25:
@@ -426,11 +397,9 @@ RECORD_INSTEAD = ("slow voltage ramps in both directions with rests between (the
 
 #: The coarsest sample period (s) the fit takes: a rig's log is sampled at 1 kHz or so; 1 s is a time in milliseconds.
 MAX_PERIOD = 0.05
-#: A cart logged faster than this (m/s, from one sample to the next) jumped: a lost encoder count or missing samples
-#: (the IP02 tops out near 1.5 m/s at 10 V; a one-sample 3 mm glitch at 1 kHz, 3 m/s, still fits).
+#: A cart logged faster than this (m/s, sample to sample) jumped: a lost encoder count or missing samples (the IP02 tops out near 1.5 m/s at 10 V).
 MAX_SPEED = 5.0
-#: How far (m) x may go past the track's end (a zero a little off the centre): 9 mm past it, the replay's cart, held at
-#: the end stop, could not follow, and a fit was refused after 21 s with a general message (helper's audit; 5 % was allowed).
+#: How far (m) x may go past the track's end (a zero a little off the centre); 9 mm past, the replay's cart, held at the end stop, could not follow.
 END_SLACK = 0.002
 #: A logged pendulum angle swinging over more than this (rad) is a pendulum on the cart (a cart alone logs a still or absent angle).
 ALPHA_SWINGS = 0.05
@@ -520,8 +489,7 @@ class _Setup:
 
     @property
     def denoise(self) -> bool:
-        """Whether the logged voltage carries sample noise the motor never saw (a measured, not a commanded,
-        voltage; the cart alone): the replays then use its denoised twin (and :func:`_result` floors the uncertainties)."""
+        """Whether the logged voltage carries noise the motor never saw (the cart alone): the replays use its denoised twin."""
         return not self.with_pendulum and self.voltage_noise > _polish.VOLTAGE_NOISE
 
 
@@ -550,8 +518,7 @@ class _Answer:
 
 
 def _rival(setup: _Setup, theta: np.ndarray, cost: float) -> None:
-    """Keeps a minimum a search stage found, its cost on what was searched: where it replays nearly as well as the answer,
-    the answer's uncertainties and ranges take it in (:data:`RIVAL_SIGMAS`)."""
+    """Keeps a minimum a search stage found, its cost on what was searched (see :data:`RIVAL_SIGMAS`)."""
     if math.isfinite(cost):
         setup.rivals.append((np.array(theta, dtype=float), float(cost)))
 
@@ -605,7 +572,6 @@ def _observer_search(setup: _Setup) -> _Candidate:
         setup.progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
         starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / setup.scales))
     found = _observer.search(searched, space, starts)
-    # Its Levenberg-Marquardt steps (OpenBLAS) end some 1e-11 apart on different CPUs; what starts from here does not (START_DIGITS).
     found = replace(found, theta=space.project(exact.significant(found.theta, START_DIGITS)))
     rms_observed = math.sqrt(found.cost / sum(a.measured.size for a in searched)) * float(np.mean([a.sigma[0] for a in searched]))
     setup.progress(f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
@@ -646,7 +612,6 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
     for cycle in range(SCAN_CYCLES):
         if cycle and result.cost <= target:
             break
-        # Scans (SCAN_CYCLES), the polish and the walk, once whatever the cost (the unseen rig's slow ramps: 1.17 steps -> 0.88).
         scanned = _polish.scan_directions(searched, space, result.theta)
         if scanned.cost >= (1 - SCAN_GAIN) * result.cost:
             break
@@ -714,9 +679,8 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
 
 
 def _rescanned(setup: _Setup, answer: _Answer) -> _Answer:
-    """Stage 2, where the answer misses (:data:`GLOBAL_ABOVE_STEPS`): :data:`RESCAN`, then evolved and polished (:func:`_evolved`);
-    taken if it replays better. Not with the pendulum, which has no estimate: from its answer instead, the sticky rig's closed loop
-    with 10 mV went from 3.35 to 1.81 steps with v2 -18 % and B +27 % called determined at more than 3 sigmas."""
+    """Stage 2, where the answer misses (:data:`GLOBAL_ABOVE_STEPS`): :data:`RESCAN`, then evolved and polished (:func:`_evolved`); taken if it
+    replays better. Not with the pendulum, which has no estimate (from its answer instead, the sticky rig's closed loop: v2 "determined" 18 % low)."""
     estimate, space, searched = answer.candidate.estimate, setup.space, answer.searched
     if estimate is None or answer.rms <= GLOBAL_ABOVE_STEPS * setup.step or not {"F2", "v2"} <= set(setup.names):
         return answer
@@ -749,7 +713,6 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
     regimes = [slip_shares(params, a.V, _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]) for a in answer.replays]
     if not slip_only(*(sum(r[k] for r in regimes) for k in (0, 1))):
         return answer
-    # A log longer than the polish sees whole is moved on what CMA-ES replays (SEARCH_SECONDS), the end polished on all the polish sees.
     sampled = _sampled(setup, answer)
     moved, cost = result, _cost_there(setup, sampled, searched, result)
     for sign in (1.0, -1.0):
@@ -816,12 +779,9 @@ def shifted_voltage(V: np.ndarray, lag: int) -> np.ndarray:
 
 
 def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
-    """How far (log units) the best common scale of the gain, forces and drags moves from ``theta`` when the logged voltage
-    is replayed instead of the answer's denoised one: the motor saw neither, so the gap floors their uncertainty (the heavy
-    rig's triangle wave with 10 mV: the scale 3.5 % low, reported to +-0.8 %; the logged voltage's best 2 % higher). Two batched
-    scans of :data:`SCAN_POINTS` (within +-10 %, then between the best one's neighbours); 0 where the first's least cost is at
-    an end: that replay does not follow the logs (a 10 min log with 10 mV diverged in a stretch, its cost flat in the scale).
-    """
+    """How far (log units) the best common scale of the gain, forces and drags moves from ``theta`` replaying the logged voltage, not the denoised
+    one: the motor saw neither, so the gap floors their uncertainty (heavy rig, triangle wave, 10 mV: the scale 3.5 % low, said +-0.8 %; the logged
+    voltage's best 2 % higher). Two scans of :data:`SCAN_POINTS`; 0 where the first's least cost is at an end (a replay off the logs)."""
     logged = _pieces_of(setup, answer.candidate.logged, answer.candidate.whole)
     centre, span = 0.0, 0.1
     for first in (True, False):
@@ -834,10 +794,9 @@ def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
 
 
 def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[int], told: float) -> tuple[np.ndarray, list[str]]:
-    """How far (scaled) each of the ``determined`` parameters moves, the largest over what the logs may not tell (the voltage shifted by
-    :data:`LAG_SPREAD_SHIFTS` samples; a first state slower than :data:`MOVING_START` at rest, :data:`FIRST_AT_REST`): one Gauss-Newton step
-    from ``theta`` each (central differences as :func:`_polish.profile`'s), the others held; and what counted. A shift after whose step the
-    logs replay at ``told`` times the cost or more is told apart and not counted; the first state at rest always counts."""
+    """How far (scaled) each ``determined`` parameter moves, the most over what the logs cannot tell (the voltage shifted :data:`LAG_SPREAD_SHIFTS`; a
+    first state slower than :data:`MOVING_START` at rest, :data:`FIRST_AT_REST`): one Gauss-Newton step each, the others held; and what counted. A
+    shift whose step costs ``told`` times as much or more is told apart; a first state at rest always counts."""
     spread, counted = np.zeros(theta.size), []
     if not determined:
         return spread, counted
@@ -884,11 +843,9 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
     values = {n: float(v * s) for n, v, s in zip(names, theta_opt, scales)}
     params = params0.with_values(**values)
     uncertainty = prof.sigma.copy()
-    # A force threshold is read against the voltage: it cannot be known better than the logged voltage's
-    # own noise (the replay sees a denoised estimate of what the motor got) times the drive per volt.
+    # A force threshold is read against the voltage: known no better than its logged noise (the replay sees it denoised) times the drive per volt.
     if setup.denoise:
         K, _ = motor_constants(params.with_values(force_gain=1.0))
-        # ... and the forces, drags and gain no better than the voltage's estimate shows their common scale.
         shift = _voltage_shift(setup, answer, theta_opt)
         for j, n in enumerate(names):
             if n in ("F1", "F2") and prof.status[j] == _polish.DETERMINED:
@@ -896,7 +853,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
             if n in _polish.SCALED and prof.status[j] == _polish.DETERMINED:
                 uncertainty[j] = max(uncertainty[j], abs(theta_opt[j]) * math.expm1(shift))
     status, allowed_scaled = list(prof.status), list(prof.allowed)
-    # The voltage's alignment, as far as the logs cannot tell it (LAG_SPREAD_SHIFTS).
     determined = [j for j, s_ in enumerate(status) if s_ == _polish.DETERMINED]
     spread, unknowns = _spread(setup, answer, theta_opt, determined, math.inf if setup.with_pendulum else LAG_TOLD)
     if spread.any():
@@ -904,7 +860,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
         for j in determined:
             if uncertainty[j] > _polish.MAX_RELATIVE_SIGMA * abs(theta_opt[j]):
                 status[j], uncertainty[j] = _polish.BOUNDED, math.inf
-    # Other minima the searches found that replay within RANGE_COST_RATIO of the answer's cost: the logs do not tell them apart.
     rivals = [theta for theta, cost in setup.rivals if cost <= _polish.RANGE_COST_RATIO * answer.polished.cost]
     rivalled = []
     for theta in rivals:
@@ -933,7 +888,6 @@ def _result(setup: _Setup, answer: _Answer, start_values: np.ndarray, t_start: f
            f"within {_polish.RANGE_COST_RATIO:g} times the answer's cost" if rivalled else "")
     )
 
-    # The check: the whole logs replayed with the answer (restarted only where the state is known).
     curves, replayed, stretches, n_stretches = [], [], [], 0
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     for e, a in zip(candidate.whole, replays):
@@ -1018,28 +972,23 @@ def fit_parameters(
     logs : iterable of RampLog
         One or more logs (ramp tests or closed-loop runs) at a fixed sample period.
     params0 : PlantParameters
-        Starting values and every parameter that is not fitted (pendulum, motor, ...); default
-        IP02 cart with the pendulum removed (ramp-test logs).
+        Starting values and every parameter that is not fitted (pendulum, motor, ...); default IP02 cart with the pendulum removed (ramp-test logs).
     fit : sequence of str
         Names to fit, among ``F1 v1 F2 v2 B Beq force_gain M_cart``.
     fit_mass : bool
-        Also fit ``M_cart`` (expect large uncertainties: only the fixed rotor inertia tells a common scale
-        of the mass, the drags, the forces and the force gain).
+        Also fit ``M_cart`` (expect large uncertainties: only the fixed rotor inertia tells a common scale of the mass, drags, forces and force gain).
     interval : float
-        Spacing (s) of the state estimates: where the pieces of long logs start and an upright
-        pendulum's replay restarts (every :data:`pendulab.calibration._polish.UNSTABLE_WINDOW`).
+        Spacing (s) of the state estimates: the pieces of long logs start on them, an upright pendulum's replay restarts from them.
     regularization : float
         Weight of the weak prior towards ``params0`` (0 switches it off).
     start : {"auto", "given"}
-        ``"auto"``: the friction starts from the ramp-test extraction where the logs are ramp tests
-        (:func:`ramp_start`); ``"given"``: from ``params0``. The observer search also starts from the
-        logs' own estimate (:mod:`pendulab.calibration._start`; not for logs with the pendulum).
+        ``"auto"``: the friction starts from the ramp-test extraction where the logs are ramp tests (:func:`ramp_start`); ``"given"``: from
+        ``params0``. The observer search also starts from the logs' own estimate (:mod:`pendulab.calibration._start`; not for logs with the pendulum).
     on_progress : callable, optional
         Called with a line of text at each stage.
     voltage_lag : int
-        Samples by which the logs' voltage was logged early (negative: late); they are shifted so before the fit.
-        The fit also looks for a shift itself (:data:`LAG_PROBE_ITER`) and, where the answer replays the logs
-        better shifted, fits them again so (``FitResult.voltage_lag``: the shift used).
+        Samples by which the logs' voltage was logged early (negative: late); shifted back before the fit. The fit also looks for one itself
+        (:data:`LAG_PROBE_ITER`) and, where the logs replay better shifted, fits them again so (``FitResult.voltage_lag``: the shift used).
 
     Returns
     -------
@@ -1072,7 +1021,6 @@ def fit_parameters(
     if start == "auto":
         params0, note = ramp_start(logs, params0)
         progress(note)
-    # The ramp extraction's least squares (scipy, OpenBLAS) differ in their last bits between CPUs: rounded (START_DIGITS).
     params0 = params0.with_values(**{n: exact.significant(float(getattr(params0, n)), START_DIGITS) for n in names})
     start_values = np.array([getattr(params0, n) for n in names])
     scales = np.array([abs(v) if abs(v) > 1e-3 * _TYPICAL[n] else _TYPICAL[n] for n, v in zip(names, start_values)])
@@ -1085,7 +1033,6 @@ def fit_parameters(
         pieces=_pieces(logs, stride), search_pieces=_search_pieces(logs, stride),
         voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
     )
-    # The replay and the observer, compiled once per machine.
     if not _replay.prepare(params0, [log.period for log in logs], names):
         progress(f"{VM_FALLBACK_NOTE}; to compile it, {install_hint()}")
     answer = _evolved(setup, _polished(setup, _observer_search(setup)), "search")
@@ -1129,11 +1076,8 @@ def confidence_of(status: Sequence[str], sigma: np.ndarray, allowed: dict[str, t
     Returns
     -------
     status, sigma, allowed, note
-        Unchanged, with an empty note, when the replay is within :data:`CONFIDENT_STEPS` encoder steps.
-        Otherwise every "determined" becomes "bounded" with no uncertainty and no range is claimed (every
-        ``allowed`` becomes ``(0, inf)``), and the note says why: a profile around a point that misses the
-        logs says nothing about where the logs' own answer lies (on the unseen rig's triangle wave, missed
-        by 4.5 steps, it gave Beq 61.00 to 61.04 and F1 2.118 to 2.131; the rig's are 6.1 and 2.3).
+        Unchanged, with an empty note, within :data:`CONFIDENT_STEPS` encoder steps. Otherwise every "determined" becomes "bounded" with no
+        uncertainty and no range, and the note says why: a profile around a point missing the logs says nothing of where their own answer lies.
 
     Examples
     --------
@@ -1158,8 +1102,7 @@ def confidence_of(status: Sequence[str], sigma: np.ndarray, allowed: dict[str, t
     return demoted, sigma, {name: (0.0, math.inf) for name in allowed}, note
 
 
-#: Beyond the slip region (the drag ``Beq`` alone) the cart must spend at least this share of its moving
-#: samples, and at least MIN_BEYOND_SAMPLES, for a log to tell ``B`` from ``Beq``.
+#: A log tells ``B`` from ``Beq`` with at least this share of its moving samples beyond the slip region (``Beq`` alone), and MIN_BEYOND_SAMPLES.
 MIN_BEYOND_SHARE = 0.02
 MIN_BEYOND_SAMPLES = 50
 #: What such a log cannot determine (:func:`split_of_the_drag`).
@@ -1169,9 +1112,8 @@ SLIP_ONLY_UNDETERMINED = ("B", "Beq", "force_gain", "F1", "F2", "v1", "v2")
 def slip_shares(params: PlantParameters, V: np.ndarray, states: np.ndarray) -> tuple[int, int]:
     """``(inside, beyond)``: how many samples of a replay the cart moves inside the slip region and beyond it.
 
-    Moving: at least ``v1``. Inside: the law's slip regime (slower than ``v2`` with a motor force below ``F2``,
-    SPEC §2), where the friction is ``B*xdot`` on top of ``Beq``; beyond, ``Beq`` alone. The regime is the
-    plant's own decision (:func:`pendulab.model.plant.friction_regimes`).
+    Moving: at least ``v1``. Inside: the law's slip regime (slower than ``v2`` with a motor force below ``F2``, SPEC §2), where the friction is
+    ``B*xdot`` on top of ``Beq``; beyond, ``Beq`` alone. The regime is the plant's own decision (:func:`pendulab.model.plant.friction_regimes`).
 
     Examples
     --------
@@ -1194,11 +1136,10 @@ def split_of_the_drag(names: Sequence[str], status: Sequence[str], sigma: np.nda
         params: PlantParameters, regimes: Sequence[tuple[int, int]]) -> tuple[tuple[str, ...], np.ndarray, dict[str, tuple[float, float]], str]:
     """What a log that never leaves the slip region cannot determine, whatever the profile around the answer says.
 
-    Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE` of its
-    moving samples beyond it (with both ``B`` and ``Beq`` fitted) shows that sum (its split only in the creep below ``v1``,
-    where ``Beq`` acts alone); the common scale of the drive, the forces and that drag, and ``v1``, only through the cart's
-    inertia; ``v2`` and ``F2`` only from below. Each of :data:`SLIP_ONLY_UNDETERMINED` is then reported bounded (ranges in
-    the branches below), and a note says why and what to record. Else unchanged.
+    Inside the slip region the drag is ``B + Beq``: a log whose replay spends fewer than :data:`MIN_BEYOND_SHARE` of its moving samples beyond it
+    (with both ``B`` and ``Beq`` fitted) shows that sum (its split only in the creep below ``v1``, where ``Beq`` acts alone); the common scale of the
+    drive, the forces and that drag, and ``v1``, only through the cart's inertia; ``v2`` and ``F2`` only from below. Each of
+    :data:`SLIP_ONLY_UNDETERMINED` is then reported bounded, and a note says why and what to record. Else unchanged.
 
     Returns
     -------

@@ -2,14 +2,11 @@
 
 A log is read from
 
-- a CSV file whose header names at least ``t``, ``V`` and ``x`` (seconds, volts, metres; ``alpha`` in
-  radians optional; other columns are ignored; lines starting with ``#`` are comments), or
-- the ``run.csv`` / ``run.mat`` that ``pendulab simulate`` writes (columns ``t``, ``x``, ``voltage``,
-  ``alpha_measured``, ...): ``voltage`` is used as ``V``, ``alpha_measured`` (else ``alpha``) as the angle, or
+- a CSV file with a header naming ``t``, ``V``, ``x`` (s, V, m) and optionally ``alpha`` (rad); other columns and ``#`` lines are ignored, or
+- the ``run.csv`` / ``run.mat`` of ``pendulab simulate``: ``voltage`` is read as ``V``, ``alpha_measured`` (else ``alpha``) as the angle, or
 - a folder of the old MATLAB lab's logs (one ``.mat`` per signal, see :func:`read_old_lab_folder`).
 
-Sample ``k`` means: ``x[k]`` (and ``alpha[k]``) measured at ``t[k]``, and ``V[k]`` applied from
-``t[k]`` until ``t[k+1]``.
+Sample ``k`` means: ``x[k]`` (and ``alpha[k]``) measured at ``t[k]``, and ``V[k]`` applied from ``t[k]`` until ``t[k+1]``.
 
 Examples
 --------
@@ -107,9 +104,8 @@ class RampLog:
 def encoder_step(x: np.ndarray) -> float:
     """The encoder step of logged positions (or angles): the smallest change that recurs, 0 if unquantized.
 
-    The one rule for the ramp-test extraction and the fit (its rests and noise floor). Quantized data
-    changes by whole multiples of one step; the step is the median of the smallest changes, so that a
-    stray tiny difference (a rounding in a CSV) does not pass for it.
+    The one rule for the ramp-test extraction and the fit (its rests and noise floor). Quantized data changes by whole multiples of one step; the step
+    is the median of the smallest changes, so that a stray tiny difference (a rounding in a CSV) does not pass for it.
 
     Examples
     --------
@@ -226,8 +222,7 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         return line.split() if delimiter is None else next(csv.reader([line], delimiter=delimiter))
 
     if len(lines) > 1 and not text.endswith(("\n", "\r")):
-        # Every writer ends its rows with a line end; a last row without one was cut off mid-write
-        # (a crash, a full disk, a copy stopped early), possibly mid-number, which would read as a wrong value.
+        # A last row without a line end was cut off mid-write (a crash, a full disk, a copy stopped early), possibly mid-number: a wrong value.
         raise CalibrationError(f"log {path}, line {lines[-1][0]}: the file ends in the middle of this row (no line end): it was cut off; "
                                f"delete that line (or add a line end if the row is complete) and run again")
     header = [h.strip() for h in split(header_line)]
@@ -284,7 +279,6 @@ def _is_number(text: str) -> bool:
 
 def _read_mat(path: Path) -> dict[str, np.ndarray]:
     """Column vectors of a ``run.mat`` (or any .mat of column vectors), by variable name."""
-    # Numeric (not structs, meta, or strings), non-empty, and a vector (at most 2-D with one side 1).
     return {name: array.astype(float).ravel() for name, array in read_mat_variables(path, what=f"log {path}").items()
             if array.dtype.kind in "fiub" and array.ndim <= 2 and array.size > 0 and (array.ndim < 2 or 1 in array.shape)}
 
@@ -292,8 +286,7 @@ def _read_mat(path: Path) -> dict[str, np.ndarray]:
 def read_mat_variables(path: str | os.PathLike[str], what: str | None = None) -> dict[str, np.ndarray]:
     """Numeric and other arrays of a MATLAB ``.mat`` file, MAT v5 (SciPy) or v7.3 (HDF5, h5py).
 
-    v7.3 files store arrays column-major; they are transposed back to MATLAB's shape. Structs and cell
-    arrays come back as object arrays (v5) or are skipped (v7.3).
+    v7.3 stores arrays column-major; transposed back to MATLAB's shape. Structs and cell arrays come back as object arrays (v5) or are skipped (v7.3).
 
     Raises
     ------
@@ -381,23 +374,18 @@ def _two_column(path: Path) -> np.ndarray:
 def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """Read a folder of the old MATLAB lab's logs: one ``.mat`` per signal, each ``[t, value]``.
 
-    The old lab saved the angle, the cart position and the voltage in separate files (MAT v5 or v7.3),
-    each a two-column array at a variable time step. The signal of each file is told by its file name
-    (``angle``/``alpha``/``theta``/``pend``, ``position``/``pos``/``cart``/``x``,
-    ``voltage``/``volt``/``vm``/``u``/``v``), else by its variable's name.
+    The old lab saved each signal in its own file (MAT v5 or v7.3), a two-column array at a variable time step, told by its file name
+    (``angle``/``alpha``/``theta``/``pend``, ``position``/``pos``/``cart``/``x``, ``voltage``/``volt``/``vm``/``u``/``v``) else its variable's name.
 
-    The columns are put on one uniform time base: the time span all three cover, at the median sample
-    period of the finest signal. Position and angle are interpolated linearly; the voltage is held
-    (zero-order hold, as a DAC holds it), so ``voltage[k]`` is what was applied from ``t[k]`` on.
+    The columns are put on one uniform time base: the time span all three cover, at the median sample period of the finest signal. Position and angle
+    are interpolated linearly; the voltage is held (zero-order hold, as a DAC holds it), so ``voltage[k]`` is what was applied from ``t[k]`` on.
 
     Units and conventions (what can be told from the data, and only that):
 
-    * angle: radians; if its largest magnitude exceeds ``2*pi + 0.5`` it is taken as degrees. If its
-      median magnitude is above ``pi/2`` the log was zeroed with the pendulum hanging (the old lab's
-      encoder zero), and ``alpha`` is wrapped to the upright convention ``alpha - pi`` in
+    * angle: radians; if its largest magnitude exceeds ``2*pi + 0.5`` it is taken as degrees. If its median magnitude is above ``pi/2`` the log was
+      zeroed with the pendulum hanging (the old lab's encoder zero), and ``alpha`` is wrapped to the upright convention ``alpha - pi`` in
       ``(-pi, pi]``; the sign is kept as logged (it cannot be told from the data).
-    * position: metres; if its largest magnitude exceeds 1.5 m (longer than the track) it is taken as
-      millimetres.
+    * position: metres; if its largest magnitude exceeds 1.5 m (longer than the track) it is taken as millimetres.
     * voltage: volts, as logged.
 
     Parameters
@@ -408,14 +396,13 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     Returns
     -------
     dict of str to ndarray
-        ``t`` (s, starting where the signals start), ``alpha`` (rad, upright convention), ``x`` (m),
-        ``voltage`` (V), equally long.
+        ``t`` (s, starting where the signals start), ``alpha`` (rad, upright convention), ``x`` (m), ``voltage`` (V), equally long.
 
     Raises
     ------
     CalibrationError
-        (a :class:`~pendulab.errors.UserError`) Not a folder, no .mat files, a signal missing or given
-        twice, a file that is not one ``[t, value]`` array, signals that do not overlap in time.
+        (a :class:`~pendulab.errors.UserError`) Not a folder, no .mat files, a signal missing or given twice, a file that is not one ``[t, value]``
+        array, signals that do not overlap in time.
     """
     folder = Path(path)
     if not folder.is_dir():
@@ -425,7 +412,6 @@ def read_old_lab_folder(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         raise CalibrationError(f"old-lab log folder {folder} holds no .mat files; expected one .mat per signal (angle, position, voltage)")
     found: dict[str, Path] = {}
     for file in files:
-        # by the file's name, else by its variables' names
         signal = _signal_of(file.stem) or next((s for s in map(_signal_of, read_mat_variables(file, what=f"old-lab log file {file}")) if s), None)
         if signal is None:
             continue  # another file in the folder

@@ -2,23 +2,15 @@
 
 One iteration, for each direction (+ then -):
 
-1. **centre** the cart: a P loop on the position (with a slow integral that breaks stiction) until the
-   cart rests within ``centre_tolerance`` of 0;
-2. **slow ramp**: the voltage rises from 0 at ``ramp_rate`` until the cart breaks away (``F1``) and
-   then moves ``motion_distance`` freely;
-3. **release**: the voltage drops to 0 and the cart coasts to a stop; the decay of its speed gives
-   ``v2``, ``B`` and ``v1``;
-4. **probe**: a steep ramp (``probe_rate``) from rest to ``probe_factor`` times the breakaway
-   voltage, held until the cart has moved ``probe_distance``, then released. A slow ramp leaves the
-   strong-drag regime by speed (``v2``) before the force reaches ``F2``; only a force that rises
-   faster than the cart can follow shows ``F2``, "the force above which motion is smooth".
+1. **centre** the cart: a P loop on the position (with a slow integral that breaks stiction) until the cart rests within ``centre_tolerance`` of 0;
+2. **slow ramp**: the voltage rises from 0 at ``ramp_rate`` until the cart breaks away (``F1``) and then moves ``motion_distance`` freely;
+3. **release**: the voltage drops to 0 and the cart coasts to a stop; the decay of its speed gives ``v2``, ``B`` and ``v1``;
+4. **probe**: a steep ramp (``probe_rate``) from rest to ``probe_factor`` times the breakaway voltage, held until the cart has moved
+   ``probe_distance``, then released: only a force rising faster than the cart can follow shows ``F2`` (a slow ramp leaves the drag by speed first).
 
-Each iteration is announced through ``on_iteration(i, n)``. Whenever the cart passes
-``track_limit`` the voltage drops to 0 and the next centring backs it off. Ctrl-C (or any
-``KeyboardInterrupt``, also from a callback or a signal) and a rig that ends the test
-(:class:`~pendulab.calibration.rig.RigEnded`: a fault, a restart, its watchdog, a lost link) switch the
-motor off and return what was measured: ``log.interrupted`` is then true, ``log.end_reason`` says why,
-and ``log.iterations_done`` iterations finished by ``log.iterations_done_at``.
+Whenever the cart passes ``track_limit`` the voltage drops to 0 and the next centring backs it off. Ctrl-C (or any ``KeyboardInterrupt``, also from a
+callback or a signal) and a rig that ends the test (:class:`~pendulab.calibration.rig.RigEnded`) switch the motor off and return what was measured:
+``log.interrupted`` is then true, ``log.end_reason`` says why, and ``log.iterations_done`` iterations finished by ``log.iterations_done_at``.
 
 Examples
 --------

@@ -1,9 +1,7 @@
 """The rig interface of the calibration procedure, and the virtual rig.
 
-A :class:`Rig` takes one voltage per period and returns the measured cart position. The ramp test
-(:func:`pendulab.calibration.ramp.run_ramp_test`) only talks to this interface, so the same code runs
-against the real rig (through the hardware-in-the-loop link, SPEC §9) and against the virtual rig
-here: the plant FMU with the pendulum removed (``Mp = 0``).
+A :class:`Rig` takes one voltage per period and returns the measured cart position. The ramp test only talks to this interface, so the same code runs
+against the real rig (the hardware-in-the-loop link, SPEC §9) and the virtual rig here: the plant FMU without the pendulum.
 
 Examples
 --------
@@ -32,16 +30,14 @@ NO_PENDULUM = {"Mp": 0.0, "Lp": 0.0, "lp": 0.0, "Ip": 0.0, "Bp": 0.0}
 class RigEnded(Exception):
     """The rig ended the test early (a fault, a restart, its watchdog, a lost link, its track limit).
 
-    The ramp test stops there, the motor off, and keeps what was measured (like Ctrl-C); the message
-    names the cause.
+    The ramp test stops there, the motor off, and keeps what was measured (like Ctrl-C); the message names the cause.
     """
 
 
 class Rig(abc.ABC):
     """A cart on a track that takes a voltage each period and reports its measured position.
 
-    Implementations: :class:`VirtualRig` (plant FMU, pendulum removed) and, later, the HIL rig.
-    ``step`` blocks for one period on real hardware; on a virtual rig it returns at once.
+    Implementations: :class:`VirtualRig` and, later, the HIL rig. ``step`` blocks for one period on real hardware, returns at once on a virtual rig.
     """
 
     #: Control period (s).
@@ -82,8 +78,7 @@ class VirtualRig(Rig):
     Parameters
     ----------
     params : PlantParameters, optional
-        The cart's true parameters (default: IP02 cart, lab friction). The pendulum fields are
-        zeroed whatever is given.
+        The cart's true parameters (default: IP02 cart, lab friction). The pendulum fields are zeroed whatever is given.
     friction : sequence of 5 floats, optional
         True friction vector ``[F1, v1, F2, v2, B]`` (overrides ``params``).
     x0 : float
@@ -91,9 +86,8 @@ class VirtualRig(Rig):
     period : float
         Step length (s), default 1 ms.
     backend : {"auto", "fmu", "casadi"}
-        ``"fmu"`` steps ``Plant.fmu`` through fmpy (built on first use); ``"casadi"`` steps the
-        CasADi model in-process (the same equations, no compiler needed); ``"auto"`` uses the FMU
-        and falls back to CasADi when it cannot be built.
+        ``"fmu"`` steps ``Plant.fmu`` through fmpy (built on first use); ``"casadi"`` steps the CasADi model in-process (the same equations, no
+        compiler needed); ``"auto"`` uses the FMU and falls back to CasADi when it cannot be built.
     progress : callable(str), optional
         Told when the plant FMU is being built (first use).
     """

@@ -1,10 +1,8 @@
 """Synthetic logs with known parameters: the fit's test corpus (used by ``tests/`` and ``bench/``).
 
-Each log is the CasADi plant under the *true* switching stick-slip law driven by a voltage profile,
-then position noise and the encoder's quantization, as a rig would log it; optionally noise on the
-logged voltage (a measured, not a commanded, voltage). The corpus (:func:`corpus`) crosses
-:data:`SHAPES` with :data:`RIGS` and two voltage-noise levels, and holds a seeded third of the cases
-out (:func:`held_out`): those are looked at only at the end and reported apart.
+Each log is the CasADi plant under the *true* switching stick-slip law driven by a voltage profile, then position noise and the encoder's
+quantization, as a rig would log it; optionally noise on the logged voltage. The corpus (:func:`corpus`) crosses :data:`SHAPES` with :data:`RIGS` and
+two voltage-noise levels, and holds a seeded third of the cases out (:func:`held_out`): those are looked at only at the end and reported apart.
 
 Examples
 --------
@@ -46,9 +44,8 @@ VOLTAGE_NOISE = (0.0, 0.01)
 def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
     """Voltage samples (one per :data:`STEP`) of an open-loop shape.
 
-    ``"ramps with holds"``: slow ramps out to 1.2-3 V, held 0.6 s, ramped down, rested, both directions;
-    ``"ramps with rests"``: ramps to 2.5-4 V dropped to 0 at the peak; ``"triangle"``: a 0.4 Hz triangle wave of 3 V; ``"random steps"``: steps of random size and sign,
-    some below the breakaway; ``"chirp"``: a sine sweep from 0.3 to 3 Hz with a slow offset.
+    ``"ramps with holds"``: slow ramps to 1.2-3 V, held 0.6 s, down, rest, both ways; ``"ramps with rests"``: to 2.5-4 V, dropped at the peak;
+    ``"triangle"``: 0.4 Hz, 3 V; ``"random steps"``: random size and sign, some below the breakaway; ``"chirp"``: 0.3 to 3 Hz with a slow offset.
     """
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration / STEP))) * STEP
@@ -106,8 +103,7 @@ def _frozen(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return arrays
 
 
-#: The runs behind the synthetic logs are cached in the process (a run costs about 0.1 ms of Python per sample, and the
-#: tests and the corpus ask for each one several times: with and without voltage noise, from several tests).
+#: The runs behind the synthetic logs are cached in the process (about 0.1 ms of Python per sample; tests and the corpus ask for each several times).
 RUNS_CACHED = 64
 
 
@@ -115,8 +111,7 @@ def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 
                   voltage_noise: float = 0.01, seed: int = 0, cart_hold: float = 0.35) -> RampLog:
     """A log of an open-loop ``shape`` (:func:`voltage_profile`) on the rig ``params``.
 
-    A slow outer loop keeps the cart on its track: the profile is added to a weak position feedback
-    (blocks of 0.1 s, as a TA would).
+    A slow outer loop keeps the cart on its track: the profile is added to a weak position feedback (blocks of 0.1 s, as a TA would).
     """
     V, x = _open_loop_run(shape, params, float(duration), seed, cart_hold)
     return _measured(np.arange(x.size) * STEP, V, x, params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")
