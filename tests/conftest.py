@@ -69,7 +69,7 @@ FIRST = ("realtime",)
 #: demo session twice in another).
 LAST = ("test_fit_shapes.py", "ramp_test_fit", "test_fit_global.py", "test_fit_reproducible.py", "test_fit_corpus.py", "test_calibration_cli.py",
         "test_fit_valleys.py", "test_fit_pieces.py", "test_fit_win64.py", "test_fit_ranges.py", "test_fit_regimes.py", "test_fit_scans.py",
-        "test_fit_start.py", "test_fit_observer.py", "test_old_lab_logs.py", *(
+        "test_fit_start.py", "test_fit_observer.py", "test_fit_replay.py", "test_old_lab_logs.py", *(
             # and what makes the kernel busy (compilers, Wine, a browser, pip, Dask's processes, Sphinx): this kernel does not preempt
             # its own work (PREEMPT_NONE), so a real-time process waited for it while they ran beside (145 of 1000 answers late).
             "test_native.py", "test_simd.py", "test_fmu_build.py", "test_fmi3_plant.py", "test_readme_fmi.py", "test_docs_command.py",

@@ -1,0 +1,35 @@
+"""The fit's compiled replay (:mod:`pendulab.calibration._replay`): the plant's own equations, its constant divisions made
+multiplications by their reciprocals (a division costs several multiplications' time), and still the plant's motion."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from pendulab.calibration._replay import _split, _step, replay  # private: the compiled step and the key it is built for
+from pendulab.calibration.synthetic import RIGS, synthetic_log
+from pendulab.model.plant import PlantModel
+
+FREE = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
+
+
+def test_the_compiled_step_divides_by_no_constant():
+    p = RIGS["sticky"]
+    free, fixed = _split(np.asarray(p.as_vector(), dtype=float), FREE)
+    step = _step(10, free, fixed)
+    # The cart's step divides only by constants (masses, motor constants, the RK4 weights): none is left.
+    divisions = [k for k in range(step.n_instructions()) if step.instruction_id(k) == ca.OP_DIV]
+    assert not divisions, f"{len(divisions)} divisions left"
+    assert step.n_instructions() > 1000  # ten RK4 sub-steps of the cart, not an empty function
+
+
+@pytest.mark.parametrize("shape", ["chirp", "random steps"])
+def test_the_replay_follows_the_plants_own_simulation(shape):
+    p = RIGS["unseen"]
+    log = synthetic_log(shape, p, duration=3.0, voltage_noise=0.0)
+    x0 = np.array([log.x[0], 0.0, 0.0, 0.0])
+    ours = replay([p], log.V[:-1], log.t[:-1], x0, free=FREE)[0, :, 0]
+    plants = PlantModel().simulate(p, log.V[:-1], log.period, x0)[1:, 0]  # the RK4 of plant_equations as written, divisions and all
+    assert np.ptp(plants) > 0.01  # the cart moves
+    assert np.max(np.abs(ours - plants)) < 1e-9
