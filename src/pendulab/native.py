@@ -47,7 +47,7 @@ COMPILER_NAMES = ("cc", "gcc", "clang")
 SUFFIXES = {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}
 #: What the fit tells its user when it cannot compile (the factor: bench/wheel.py, CPU time of a whole fit
 #: of a 1-iteration ramp-test log, compiled functions cached against CasADi's virtual machine).
-VM_FALLBACK_NOTE = "no C compiler: CasADi's virtual machine evaluates the fit, about 35x the CPU time"
+VM_FALLBACK_NOTE = "no C compiler: CasADi's virtual machine evaluates the fit, about 55x the CPU time"
 
 
 class CompilerNeeded(UserError, FmuBuildError):
