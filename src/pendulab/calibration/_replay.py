@@ -135,7 +135,7 @@ def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer:
 
 def _by_reciprocals(f: ca.Function) -> ca.Function:
     """``f`` with each division by a constant (the fixed parameters, compiled in: a cart's mass, the motor's constants) a multiplication by the
-    constant's reciprocal: a division costs the CPU several multiplications' time, and the cart's replay ran 13 % faster. Its results differ from
+    constant's reciprocal: a division costs the CPU several multiplications' time, and the cart's replay ran 11 % faster. Its results differ from
     ``f``'s in their last bits only; the compiled replay and CasADi's virtual machine both run this one, so they still agree to the bit."""
     inputs, work = f.sx_in(), {}
     outputs = [ca.SX.zeros(f.sparsity_out(i)) for i in range(f.n_out())]
