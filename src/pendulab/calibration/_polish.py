@@ -73,6 +73,13 @@ def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple
     return [(int(b), int(e) + w - 1) for b, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]  # begins, ends
 
 
+def restart_samples(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple[int, bool]]:
+    """``(k, long)`` per rest of ``x`` (:func:`rests`): a replay restarts at sample ``k``, late in the rest (the creep has died down), with the
+    logged speed if the rest is ``long`` (:data:`RESTART_REST`), else its own."""
+    w = rest_samples(period)
+    return [(max(first, stop - w), (stop - first) * period >= RESTART_REST) for first, stop in rests(x, step, noise, period)]
+
+
 def _line(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
     """``(value at t = 0, slope)`` of the least-squares line through ``(t, x)`` by :func:`exact.lstsq` (``numpy.polyfit``'s bits vary by CPU)."""
     slope, value = exact.lstsq(np.column_stack([t, np.ones_like(t)]), x)
@@ -93,13 +100,11 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
             # Starting at rest: from the rest's line, not a smoothed speed (a stuck cart creeps below v1; 1 mm/s too much is a lasting 0.1 mm).
             hi = min(spans[0][1], 3 * w)
             x0[:2] = _line(log.t[:hi] - log.t[0], log.x[:hi])
-        for first, stop in spans:
-            # Late in the rest (the creep has died down): position and speed from a line through the positions around it (encoder steps average out).
-            k = max(first, stop - w)
-            if 0 < k < used - 1:
+        for (first, stop), (k, long) in zip(spans, restart_samples(log.x[:used], step, float(sigma[0]), log.period)):
+            if 0 < k < used - 1:  # position and speed from a line through the positions around k (encoder steps average out)
                 lo, hi = max(first, k - 2 * w), min(stop, k + w)
                 value, slope = _line(log.t[lo:hi] - log.t[k], log.x[lo:hi])
-                restarts[k] = np.array([value, slope if (stop - first) * log.period >= RESTART_REST else math.nan, 0.0, 0.0])
+                restarts[k] = np.array([value, slope if long else math.nan, 0.0, 0.0])
     if with_pendulum and float(np.median(np.abs(log.alpha))) < math.pi / 2:  # upright
         every = max(1, int(round(UNSTABLE_WINDOW / (node_stride * log.period))))
         restarts.update({j * node_stride: nodes[:, j].copy() for j in range(every, nodes.shape[1] - 1, every)})
