@@ -551,7 +551,7 @@ def _cost_there(setup: _Setup, sampled: list[_polish.Anchors], searched: list[_p
 
 def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEstimate],
                pieces: list[tuple[RampLog, int, int]] | None = None) -> list[_polish.Anchors]:
-    """The logs' anchors cut to the pieces (default ``setup.pieces``; long logs are searched on pieces, each from its state estimate)."""
+    """The logs' anchors cut to the pieces (default ``setup.pieces``; long logs are searched on pieces, each from a rest's restart or its state estimate)."""
     pieces = setup.pieces if pieces is None else pieces
     if all(piece is whole[j].log for piece, j, _ in pieces):
         return replays
@@ -992,7 +992,7 @@ def fit_parameters(
     fit_mass : bool
         Also fit ``M_cart`` (expect large uncertainties: only the fixed rotor inertia tells a common scale of the mass, drags, forces and force gain).
     interval : float
-        Spacing (s) of the state estimates: the pieces of long logs start on them, an upright pendulum's replay restarts from them.
+        Spacing (s) of the state estimates: the pieces of long logs start on them (the cart alone: on its rests), an upright pendulum's replay restarts from them.
     regularization : float
         Weight of the weak prior towards ``params0`` (0 switches it off).
     start : {"auto", "given"}
