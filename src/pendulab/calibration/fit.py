@@ -367,10 +367,8 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int],
     """``(piece, index of its log, first sample)`` for the searches: whole logs if they are short.
 
     Longer logs give the PIECE_SECONDS windows where the cart stops and starts most often, then travels most (breakaways and sticking tell the
-    friction apart), up to ``seconds`` (default STAGE_SECONDS) in all, not overlapping, each starting on a state estimate of its log; with the
-    encoder's ``step`` (the cart alone), on a long rest's restart (:func:`_polish.restart_samples`) where the log has them, so that a piece
-    replays as its stretches of the whole log do (from smoothed speeds mid-motion, a 30 s slow-ramp log fitted the force gain 20 % low, 2.4
-    steps, in 37 CPU-s).
+    friction apart), up to ``seconds`` (default STAGE_SECONDS) in all, not overlapping, each starting on a state estimate of its log; given the
+    encoder's ``step`` (the cart alone), on a long rest's restart (replayed as in the whole log; mid-motion, a 30 s slow-ramp log: gain -20 %).
     """
     seconds = STAGE_SECONDS if seconds is None else seconds
     if sum(log.duration for log in logs) <= seconds * 1.25:
@@ -555,12 +553,10 @@ def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEs
     pieces = setup.pieces if pieces is None else pieces
     if all(piece is whole[j].log for piece, j, _ in pieces):
         return replays
-    ns = 4 if setup.with_pendulum else 2
-
-    def start(j: int, first: int) -> np.ndarray:  # a rest's restart (_pieces), else the state estimate there
-        state = replays[j].restarts.get(first)
-        return state if state is not None and np.isfinite(state[1]) else np.r_[whole[j].estimates[:, first // whole[j].stride], np.zeros(4 - ns)]
-    return [replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), start(j, first)) for piece, j, first in pieces]
+    estimate = [np.r_[e.estimates, np.zeros((4 - e.estimates.shape[0], e.estimates.shape[1]))].T for e in whole]  # (4,) each stride
+    rest = [{k: s for k, s in a.restarts.items() if np.isfinite(s[1]) and not setup.with_pendulum} for a in replays]  # a cart's pieces' (_pieces)
+    return [replays[j].crop(first, min(first + len(piece) - 1, replays[j].n), rest[j].get(first, estimate[j][first // whole[j].stride]))
+            for piece, j, first in pieces]
 
 
 def _observer_search(setup: _Setup) -> _Candidate:
@@ -677,9 +673,7 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
             if found.cost < result.cost:
                 result = result.then(found, replays={"answer": _polish.EVOLVE_GENERATIONS, "search": AROUND_GENERATIONS, "start": GLOBAL_GENERATIONS}[start])
         elif start == "search" and sampled is searched:
-            # Above the answer where it searched, not polished: the dev corpus's 9 such runs stayed above when polished (1.13 -> 1.08 at best),
-            # those near it lowered their cost by 1 % or less. Still another minimum.
-            _rival(setup, theta, cost)
+            _rival(setup, theta, cost)  # not polished: the dev corpus's 9 such runs stayed above the answer if polished (1.13 -> 1.08 at best)
     if result is answer.polished:
         return answer
     rms, said = _replay_rms(setup, answer.replays, result.theta), {"answer": "the evolution strategy around the answer",
