@@ -623,11 +623,6 @@ def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
             break
         result = walked(result.then(_polish.polish(searched, space, scanned.theta, max_iter=POLISH_ITER, scan=()), replays=scanned.replays))
         setup.progress(f"scans along {', '.join(_polish.directions_of(setup.names))} and the polish: cost {scanned.start_cost:.4g} -> {result.cost:.4g}")
-    if searched is not replays:  # the thresholds once more on the whole logs: pushes the pieces lack
-        whole = _polish.polish(replays, space, result.theta, max_iter=0, scan_rounds=1, scan_spans=(0.15, 0.015))
-        # Later decisions compare costs on what was searched: the answer carries its cost there (tests/test_fit_pieces.py).
-        on_pieces = float(_polish.costs(searched, space, whole.theta[None])[0])
-        result = result.then(_polish.Polished(whole.theta, on_pieces, on_pieces, whole.iterations, whole.replays), replays=1)
     _rival(setup, result.theta, result.cost)
     rms = _replay_rms(setup, replays, result.theta)
     setup.progress(f"polished on the replay under the true stick-slip law ({result.iterations} iterations, {result.replays} batched replays): "
