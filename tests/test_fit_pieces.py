@@ -1,7 +1,8 @@
 """Long logs are searched on pieces and checked on the whole (issue 19): one measure for every decision.
 
-A log longer than ``STAGE_SECONDS`` is searched on its most informative pieces (the cart alone: each from
-one of its rests, as the whole log's replay restarts there). The decisions after the polish (the
+A log longer than ``STAGE_SECONDS`` is searched on its most informative pieces (the cart alone: first those
+from one of its rests, as the whole log's replay restarts there); after the polish, the thresholds are
+scanned once more on the whole log (pushes the pieces lack). The decisions after that (the
 evolution strategy's start and its acceptance, which start values a parameter the log does not identify
 may keep) compare costs on the pieces: the answer carries its cost there. It once carried the whole log's
 cost, which any point's cost on the pieces beats by construction (on a 60 s log the evolution strategy

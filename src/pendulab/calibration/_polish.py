@@ -465,11 +465,11 @@ def along(space: Space, theta: np.ndarray, j: int, factors: np.ndarray) -> np.nd
 
 
 def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int = 12, work: float = math.inf,
-           scan: tuple[str, ...] = ("F1", "F2", "v2")) -> Polished:
+           scan: tuple[str, ...] = ("F1", "F2", "v2"), scan_spans: tuple[float, ...] = (2.0, 0.15, 0.015), scan_rounds: int = 2) -> Polished:
     """A pattern search on the replay errors over the scaled parameters ``theta``.
 
     The replay's error is not smooth in the parameters (a breakaway that happens or not is a jump), so derivatives mislead. The thresholds ``scan``,
-    whose jumps dominate, are first scanned one by one, twice, over spans of 2, 0.15 and 0.015 (coarse then fine, 15 factors log-spaced within
+    whose jumps dominate, are first scanned one by one, ``scan_rounds`` times, over ``scan_spans`` (coarse then fine, 15 factors log-spaced within
     ``1 + span`` either way). Each iteration tries every parameter up and down by a relative radius (2 % at first), the four diagonal moves of each of
     :data:`PAIRS` and the last good move, in one batched replay, and keeps the best if it lowers the cost; else the radius shrinks threefold, down to
     0.1 %. Bounds hold by projection (:meth:`Space.project`). It stops once it has replayed ``work`` samples (sets x samples: fit.POLISH_WORK).
@@ -488,9 +488,9 @@ def polish(logs: list[Anchors], space: Space, theta: np.ndarray, max_iter: int =
     radius, it, n = 0.02, 0, len(theta)
     # Thresholds first (the docstring). (A 0.5 ms sub-step runs 3 times faster but moved the replay an encoder step: a log of steps went astray.)
     scanned = theta
-    for name in [n_ for n_ in scan if n_ in names] * 2:
+    for name in [n_ for n_ in scan if n_ in names] * scan_rounds:
         j = names.index(name)
-        for span in (2.0, 0.15, 0.015):
+        for span in scan_spans:
             if done["samples"] > work:
                 break
             trials = along(space, scanned, j, exact.exp(np.linspace(-math.log1p(span), math.log1p(span), 15)))
