@@ -122,3 +122,24 @@ def test_a_search_run_that_ends_above_the_answer_is_not_polished(monkeypatch):
         monkeypatch.setattr(_polish, "evolve", lambda *args, **kwargs: (answer.polished.theta * 1.01, claimed))
         assert fit_module._evolved(setup, answer, "search") is answer
         assert len(polished) == runs
+
+
+def test_the_common_scale_s_search_does_not_lower_the_slip_region_s_ends(monkeypatch):
+    """Along the common scale (a cart that stays in the slip region), F2 and v2 are bounded from below only: lowered on
+    8 s of a 60 s log's pieces, the cart left the slip region in the others. A scan that lowers them is projected back."""
+    setup, answer = _searched_on_pieces(monkeypatch)
+    names, theta = setup.names, answer.polished.theta
+    scan = _polish.scan_directions
+
+    def lowering(logs, space, th, *args, **kwargs):  # the scan "finds" both ends halved
+        found = scan(logs, space, th, *args, **kwargs)
+        low = found.theta.copy()
+        for n in ("F2", "v2"):
+            low[space.names.index(n)] *= 0.5
+        return _polish.Polished(low, found.cost, found.start_cost, found.iterations, found.replays)
+
+    monkeypatch.setattr(_polish, "scan_directions", lowering)
+    moved = _polish.moved(setup.space, theta, "scale", 0.04)
+    found = fit_module._at_scale(setup, answer.searched, theta, 0.04)
+    for n in ("F2", "v2"):
+        assert found.theta[names.index(n)] >= moved[names.index(n)] * (1 - 1e-12)
