@@ -73,11 +73,11 @@ def rests(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple
     return [(int(b), int(e) + w - 1) for b, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]  # begins, ends
 
 
-def restart_samples(x: np.ndarray, step: float, noise: float, period: float) -> list[tuple[int, bool]]:
-    """``(k, long)`` per rest of ``x`` (:func:`rests`): a replay restarts at sample ``k``, late in the rest (the creep has died down), with the
-    logged speed if the rest is ``long`` (:data:`RESTART_REST`), else its own."""
+def restart_samples(spans: list[tuple[int, int]], period: float) -> list[tuple[int, bool]]:
+    """``(k, long)`` per rest ``(first, stop)`` of :func:`rests`: a replay restarts at sample ``k``, late in the rest (the creep has died down),
+    with the logged speed if the rest is ``long`` (:data:`RESTART_REST`), else its own."""
     w = rest_samples(period)
-    return [(max(first, stop - w), (stop - first) * period >= RESTART_REST) for first, stop in rests(x, step, noise, period)]
+    return [(max(first, stop - w), (stop - first) * period >= RESTART_REST) for first, stop in spans]
 
 
 def _line(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
@@ -100,7 +100,7 @@ def anchors(log, used: int, nodes: np.ndarray, node_stride: int, sigma: np.ndarr
             # Starting at rest: from the rest's line, not a smoothed speed (a stuck cart creeps below v1; 1 mm/s too much is a lasting 0.1 mm).
             hi = min(spans[0][1], 3 * w)
             x0[:2] = _line(log.t[:hi] - log.t[0], log.x[:hi])
-        for (first, stop), (k, long) in zip(spans, restart_samples(log.x[:used], step, float(sigma[0]), log.period)):
+        for (first, stop), (k, long) in zip(spans, restart_samples(spans, log.period)):
             if 0 < k < used - 1:  # position and speed from a line through the positions around k (encoder steps average out)
                 lo, hi = max(first, k - 2 * w), min(stop, k + w)
                 value, slope = _line(log.t[lo:hi] - log.t[k], log.x[lo:hi])

@@ -381,7 +381,8 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int],
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
         edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
         used = ((len(log) - 1) // M) * M + 1  # as the anchors' rests (_observer_search)
-        at_rests = {0, *(k for k, long in _polish.restart_samples(log.x[:used], step, _noise_level(log.x[:used]), log.period) if long)} if step else set()
+        spans = _polish.rests(log.x[:used], step, _noise_level(log.x[:used]), log.period) if step is not None else []
+        at_rests = {0, *(k for k, long in _polish.restart_samples(spans, log.period) if long)} if step is not None else set()
         for first in sorted({*range(0, len(log) - length + 1, max(M, (length // 8) // M * M)), *(k for k in at_rests if k + length <= len(log))}):
             changes = int(np.count_nonzero((edges >= first) & (edges < first + length)))
             moved = (travel[first + length - 1] - travel[first]) / max(travel[-1], 1e-12)
