@@ -74,8 +74,7 @@ class RampLog:
 
     def __post_init__(self) -> None:
         for name in ("t", "V", "x", "alpha"):
-            value = getattr(self, name)
-            if value is not None:
+            if (value := getattr(self, name)) is not None:
                 object.__setattr__(self, name, np.asarray(value, dtype=float).ravel())
         validate_log(self)
 
@@ -126,16 +125,13 @@ def validate_log(log: RampLog) -> None:
     """Raise :class:`CalibrationError` (one line) for unequal lengths, NaN or non-increasing time."""
     where = f"log {log.source}" if log.source else "log"
     n = len(log.t)
-    for name in ("V", "x", "alpha"):
-        value = getattr(log, name)
-        if value is not None and len(value) != n:
+    columns = {name: value for name in ("t", "V", "x", "alpha") if (value := getattr(log, name)) is not None}
+    for name, value in columns.items():
+        if len(value) != n:
             raise CalibrationError(f"{where}: column {name} has {len(value)} values but t has {n}")
     if n < 2:
         raise CalibrationError(f"{where} has {n} sample(s); a calibration log needs a ramp of many samples")
-    for name in ("t", "V", "x", "alpha"):
-        value = getattr(log, name)
-        if value is None:
-            continue
+    for name, value in columns.items():
         bad = np.flatnonzero(~np.isfinite(value))
         if bad.size:
             k = int(bad[0])
@@ -191,9 +187,8 @@ def read_log(path: str | os.PathLike[str]) -> RampLog:
         raise CalibrationError(f"log {path} does not exist")
     columns = _read_mat(path) if path.suffix.lower() == ".mat" else _read_csv(path)
     available = list(columns)
-    picked = {"t": _pick(TIME_NAMES, available), "V": _pick(VOLTAGE_NAMES if "voltage" not in available else ("voltage",), available),
-              "x": _pick(POSITION_NAMES, available)}
     accepted = {"t": TIME_NAMES, "V": VOLTAGE_NAMES, "x": POSITION_NAMES}
+    picked = {label: _pick(("voltage", *names) if label == "V" else names, available) for label, names in accepted.items()}  # 'voltage' before V, u
     missing = [label for label, name in picked.items() if name is None]
     if missing:
         raise CalibrationError(
@@ -457,11 +452,9 @@ def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
     """Write ``log`` as CSV (``t,V,x[,alpha]``), atomically."""
     path = Path(path)
     names = ["t", "V", "x"] + (["alpha"] if log.alpha is not None else [])
+    header = [f"# pendulab calibration log; source: {log.source or 'unknown'}", *(f"# event t={at:.4f}: {text}" for at, text in log.events), ",".join(names)]
     buffer = io.StringIO()
-    buffer.write(f"# pendulab calibration log; source: {log.source or 'unknown'}\n")
-    buffer.writelines(f"# event t={time:.4f}: {text}\n" for time, text in log.events)
-    buffer.write(",".join(names) + "\n")
-    np.savetxt(buffer, np.column_stack([getattr(log, n) for n in names]), delimiter=",", fmt="%.10g")
+    np.savetxt(buffer, np.column_stack([getattr(log, n) for n in names]), delimiter=",", fmt="%.10g", header="\n".join(header), comments="")
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda handle: handle.write(buffer.getvalue().encode("utf-8")))
     return path
