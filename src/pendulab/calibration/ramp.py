@@ -123,12 +123,15 @@ class _Run:
         self.note("timeout centring the cart")
         raise CalibrationError(f"the cart could not be centred within {s.phase_timeout:g} s (x={self.position * 1e3:.1f} mm); check the rig")
 
-    def ramp(self, direction: int, rate: float, target: float, distance: float) -> float | None:
-        """Ramp at ``rate`` towards ``direction*target``; stop after moving ``distance`` past breakaway.
+    def push(self, direction: int, phase: str, rate: float, target: float, distance: float) -> float | None:
+        """Centre the cart, ramp (``phase``) at ``rate`` towards ``direction*target``, stop after moving ``distance`` past breakaway, release.
 
-        Returns the voltage at breakaway (``None`` if the cart never moved).
+        Returns the voltage at breakaway (``None`` if the cart never moved), once the cart is still again.
         """
         s, dt = self.s, self.rig.period
+        sign = "+" if direction > 0 else "-"
+        self.centre()
+        self.note(f"{phase} {sign}")
         start = self.position
         breakaway_at: float | None = None
         voltage, held = 0.0, 0
@@ -141,7 +144,7 @@ class _Run:
             moved = direction * (x - start)
             if breakaway_at is None and moved >= s.breakaway_distance:
                 breakaway_at = voltage
-                self.note(f"breakaway {'+' if direction > 0 else '-'} at V={voltage:.3f}")
+                self.note(f"breakaway {sign} at V={voltage:.3f}")
                 start = x
             elif breakaway_at is not None and moved >= distance:
                 break
@@ -151,6 +154,8 @@ class _Run:
                     if breakaway_at is None:
                         self.note(f"no breakaway up to {target:g} V")
                     break
+        self.note(f"release {sign}")
+        self.wait_still()
         return breakaway_at
 
 
@@ -200,21 +205,13 @@ def run_ramp_test(
             for direction in (1, -1):
                 sign = "+" if direction > 0 else "-"
                 try:
-                    run.centre()
-                    run.note(f"slow ramp {sign}")
-                    breakaway = run.ramp(direction, settings.ramp_rate, settings.max_voltage, settings.motion_distance)
-                    run.note(f"release {sign}")
-                    run.wait_still()
+                    breakaway = run.push(direction, "slow ramp", settings.ramp_rate, settings.max_voltage, settings.motion_distance)
                     if breakaway is None:
                         progress(f"iteration {i} {sign}: no breakaway up to {settings.max_voltage:g} V")
                         continue
                     progress(f"iteration {i} {sign}: breakaway at {breakaway:.3f} V")
-                    run.centre()
-                    run.note(f"probe {sign}")
                     target = min(settings.max_voltage, settings.probe_factor * abs(breakaway))
-                    run.ramp(direction, settings.probe_rate, target, settings.probe_distance)
-                    run.note(f"release {sign}")
-                    run.wait_still()
+                    run.push(direction, "probe", settings.probe_rate, target, settings.probe_distance)
                 except _Stopped:
                     progress(f"iteration {i} {sign}: a phase timed out; going on")
             done, done_at = i, rig.time
