@@ -199,11 +199,9 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     if path.suffix.lower() == ".mat":
         return _load_mat(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")  # Windows Notepad's UTF-8 starts with a byte-order mark
+        data = json.loads(path.read_text(encoding="utf-8-sig"))  # Windows Notepad's UTF-8 starts with a byte-order mark
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationError(f"calibration file {path} cannot be read: {exc}") from None
-    try:
-        data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise CalibrationError(f"calibration file {path} is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
     return Calibration.from_dict(data, source=f"calibration file {path}")
