@@ -121,7 +121,7 @@ def breakaway_voltage(logs: Sequence[RampLog], step: float) -> float | None:
 
 
 def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParameters:
-    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio) from the logs, and ``B`` and ``v2`` where they show the slip
+    """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio to ``F1``) from the logs, and ``B`` and ``v2`` where they show the slip
     region (:func:`slip_region`; ``F2`` then at least the force the cart slid under, :func:`slipping_force`).
 
     What the logs cannot show keeps ``params0``'s value; logs with the pendulum keep ``params0``.
@@ -135,7 +135,9 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
     if V1 is not None:
         K, _ = motor_constants(params0.with_values(force_gain=1.0))
         F1 = gain * K * V1
-        values.update(F1=F1, F2=max(params0.F2, F1 * params0.F2 / max(params0.F1, 1e-9)))
+        # F2 in its ratio to F1, at least F1, not at least params0's: from a ramp extraction that read a triangle wave's F1 as 4.6 N (true 0.5),
+        # F2 stayed there (true 0.9) and the fit ended 7.7 encoder steps off with F2 45 times too large.
+        values.update(F1=F1, F2=F1 * max(params0.F2 / max(params0.F1, 1e-9), 1.0))
     if drive is not None:
         driven = params0.with_values(force_gain=gain, Beq=values["Beq"])
         slip = slip_region(logs, driven)
