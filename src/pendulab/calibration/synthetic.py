@@ -49,22 +49,28 @@ def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
     """
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration / STEP))) * STEP
-    if shape in ("ramps with holds", "ramps with rests"):
-        holds = shape == "ramps with holds"  # else faster ramps to 2.5-4 V, dropped to 0 at the peak, rests between
+    if shape == "ramps with holds":
         V = np.zeros_like(t)
-        start, sign, hold = (0.3 if holds else 0.5), 1.0, 0.6
-        while start < duration - (1.0 if holds else 2.0):
-            rise, peak = rng.uniform(0.8, 1.6), (rng.uniform(1.2, 3.0) if holds else rng.uniform(2.5, 4.0))
+        start, sign = 0.3, 1.0
+        while start < duration - 1.0:
+            rise, peak, hold = rng.uniform(0.8, 1.6), rng.uniform(1.2, 3.0), 0.6
             up = (t >= start) & (t < start + rise)
             V[up] = sign * peak * (t[up] - start) / rise
-            if not holds:
-                start += rise + rng.uniform(0.6, 1.2)
-            else:
-                held = (t >= start + rise) & (t < start + rise + hold)
-                V[held] = sign * peak
-                down = (t >= start + rise + hold) & (t < start + 2 * rise + hold)
-                V[down] = sign * peak * (1 - (t[down] - start - rise - hold) / rise)
-                start += 2 * rise + hold + rng.uniform(0.4, 0.8)
+            held = (t >= start + rise) & (t < start + rise + hold)
+            V[held] = sign * peak
+            down = (t >= start + rise + hold) & (t < start + 2 * rise + hold)
+            V[down] = sign * peak * (1 - (t[down] - start - rise - hold) / rise)
+            start += 2 * rise + hold + rng.uniform(0.4, 0.8)
+            sign = -sign
+        return V
+    if shape == "ramps with rests":  # faster ramps to 2.5-4 V, dropped to 0 at the peak, rests between
+        V = np.zeros_like(t)
+        start, sign = 0.5, 1.0
+        while start < duration - 2.0:
+            rise, peak = rng.uniform(0.8, 1.6), rng.uniform(2.5, 4.0)
+            up = (t >= start) & (t < start + rise)
+            V[up] = sign * peak * (t[up] - start) / rise
+            start += rise + rng.uniform(0.6, 1.2)
             sign = -sign
         return V
     if shape == "triangle":
