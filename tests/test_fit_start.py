@@ -197,12 +197,14 @@ def test_a_log_starting_with_a_breakaway_replays_its_first_stretch_from_rest_whe
     a = anchors_of(log, SLIPPERY.q_x)
     assert 2e-3 < a.x0[1] < 0.1  # the smoothed first speed (measured 5.8 mm/s; the true one is 0)
     names = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
-    assert _from_rest_better(a, np.asarray(SLIPPERY.as_vector(), dtype=float)[None], names)
+    scales = np.array([getattr(SLIPPERY, n) for n in names])
+    space = _polish.Space(SLIPPERY, names, scales, np.full(len(names), 1e-3), np.full(len(names), 1e3))  # theta 1: the true values
+    assert _from_rest_better(space, a, np.ones(len(names)))
     # Cut where the cart moves at about as much: the smoothed speed is the cart's, and it stays.
     k = int(np.flatnonzero((np.abs(_initial_states(log, False)[:, 1]) > 0.01) & (np.arange(len(log)) > 200))[0])
     moving = anchors_of(log.slice(k, len(log)), SLIPPERY.q_x)
     assert abs(moving.x0[1]) > 2e-3
-    assert not _from_rest_better(moving, np.asarray(SLIPPERY.as_vector(), dtype=float)[None], names)
+    assert not _from_rest_better(space, moving, np.ones(len(names)))
 
 
 def test_the_voltage_noise_estimate_ignores_steps_ramps_and_sines():

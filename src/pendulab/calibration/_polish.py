@@ -54,6 +54,10 @@ class Anchors:
         segments = self.segments[(self.segments >= start) & (self.segments < stop)] - start
         return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments, self.denoised)
 
+    def first_stretch(self) -> "Anchors":
+        """The steps up to the first restart (all of them if there is none)."""
+        return self.crop(0, int(self.segments[1]) if self.segments.size > 1 else self.n)
+
 
 def rest_samples(period: float) -> int:
     """The samples a rest lasts at least (:data:`REST_WINDOW`, :data:`REST_SAMPLES`)."""

@@ -382,7 +382,7 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int],
         length = min(len(log), int(round(PIECE_SECONDS / log.period)) + 1)
         travel = np.r_[0.0, np.cumsum(np.abs(np.diff(log.x)))]
         edges = np.array(sorted(k for span in _polish.rests(log.x, encoder_step(log.x), _noise_level(log.x), log.period) for k in span))
-        used = ((len(log) - 1) // M) * M + 1  # as the anchors' rests (_observer_search)
+        used = _used(log, M)  # as the anchors' rests (_observer_search)
         spans = _polish.rests(log.x[:used], step, _noise_level(log.x[:used]), log.period) if step is not None else []
         at_rests = {0, *(k for k, long in _polish.restart_samples(spans, log.period) if long)} if step is not None else set()
         for first in sorted({*range(0, len(log) - length + 1, max(M, (length // 8) // M * M)), *(k for k in at_rests if k + length <= len(log))}):
@@ -464,6 +464,11 @@ def _check_logs(logs: Sequence[RampLog], params0: PlantParameters, interval_samp
 
 
 # ---------------------------------------------------------------------- the fit's stages
+def _used(log: RampLog, stride: int) -> int:
+    """The samples of ``log`` the fit sees: whole intervals between its state estimates, ``stride`` samples apart."""
+    return ((len(log) - 1) // stride) * stride + 1
+
+
 def _stride(log: RampLog, interval: float) -> int:
     """Samples between the state estimates (``interval`` seconds apart) of ``log``."""
     return max(1, int(round(interval / log.period)))
@@ -566,7 +571,7 @@ def _observer_search(setup: _Setup) -> _Candidate:
     whole = []
     for log in setup.logs:
         M = setup.stride(log)
-        used = ((len(log) - 1) // M) * M + 1  # the samples the fit sees: whole intervals between state estimates
+        used = _used(log, M)
         sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
         whole.append(_LogEstimate(log, used, M, _initial_states(log, with_pendulum)[:used:M].T.copy(), np.full(used, np.nan), sigma))
     logged = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
@@ -595,20 +600,19 @@ def _observer_search(setup: _Setup) -> _Candidate:
             replays[j] = _polish.settled(restarted, vector[0], names)
         elif abs(a.x0[1]) > MOVING_START:
             # Settled (MOVING_START), not the smoothed speed at its edge: a log cut from a run at 0.4 m/s fitted v2 12 % high, "determined" to 3 %.
-            x0 = _polish.settled(a.crop(0, int(a.segments[1]) if a.segments.size > 1 else a.n), vector[0], names).x0
+            x0 = _polish.settled(a.first_stretch(), vector[0], names).x0
             replays[j], logged[j] = replace(a, x0=x0), replace(logged[j], x0=x0)
-        elif abs(a.x0[1]) > FIRST_AT_REST and _from_rest_better(a, vector, names):
+        elif abs(a.x0[1]) > FIRST_AT_REST and _from_rest_better(space, a, found.theta):
             x0 = np.r_[a.x0[0], 0.0, a.x0[2:]]
             replays[j], logged[j] = replace(a, x0=x0), replace(logged[j], x0=x0)
     return _Candidate(found.theta, found.iterations, rms_observed, whole, replays, logged, starts[1] if len(starts) > 1 else None)
 
 
-def _from_rest_better(a: _polish.Anchors, vector: np.ndarray, names: tuple[str, ...]) -> bool:
-    """Whether the first stretch of ``a`` (to its first restart) replays better from rest than from its smoothed first speed, at ``vector`` (1, n)."""
-    first = a.crop(0, int(a.segments[1]) if a.segments.size > 1 else a.n)
+def _from_rest_better(space: _polish.Space, a: _polish.Anchors, theta: np.ndarray) -> bool:
+    """Whether the first stretch of ``a`` (to its first restart) replays better from rest than from its smoothed first speed, at ``theta``."""
+    first = a.first_stretch()
     at_rest = replace(first, x0=np.r_[first.x0[0], 0.0, first.x0[2:]])
-    costs = [float(np.sum(np.nan_to_num(_polish.replay_errors([b], vector, names), nan=1e6) ** 2)) for b in (first, at_rest)]
-    return costs[1] < costs[0]
+    return _polish.costs([at_rest], space, theta[None])[0] < _polish.costs([first], space, theta[None])[0]
 
 
 def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
