@@ -835,7 +835,8 @@ def _voltage_shift(setup: _Setup, answer: _Answer, theta: np.ndarray) -> float:
 def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[int], told: float) -> tuple[np.ndarray, list[str]]:
     """How far (scaled) each ``determined`` parameter moves, the most over what the logs cannot tell (the voltage shifted :data:`LAG_SPREAD_SHIFTS`; a
     first state slower than :data:`MOVING_START` at rest, :data:`FIRST_AT_REST`): one Gauss-Newton step each, the others held; and what counted. A
-    shift whose step costs ``told`` times as much or more is told apart; a first state at rest always counts."""
+    variant whose step costs ``told`` times as much or more is told apart (a slice of a triangle wave whose cart moves at 80 mm/s at its first sample:
+    from rest, F1 14 % uncertain and B only bounded, both within 0.5 %)."""
     spread, counted = np.zeros(theta.size), []
     if not determined:
         return spread, counted
@@ -856,7 +857,7 @@ def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[
         for varied in anchors:
             e = errors(varied, theta[None])[0]
             step = exact.lstsq(J, -(e - R[0]))
-            if name != "the voltage's alignment" or np.sum((e + exact.dot(J, step)) ** 2) < told * np.sum(R[0] ** 2):
+            if np.sum((e + exact.dot(J, step)) ** 2) < told * np.sum(R[0] ** 2):
                 spread[determined] = np.maximum(spread[determined], np.abs(step))
                 counted += [name] if name not in counted else []
     return spread, counted
