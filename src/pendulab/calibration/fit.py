@@ -366,8 +366,9 @@ SEARCH_SECONDS = 8.0
 
 
 def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int], seconds: float | None = None,
-            step: float | None = None) -> list[tuple[RampLog, int, int]]:
-    """``(piece, index of its log, first sample)`` for the searches: whole logs if they are short.
+            step: float | None = None, whole: float = 0.0) -> list[tuple[RampLog, int, int]]:
+    """``(piece, index of its log, first sample)`` for the searches: whole logs if they are short (at most 1.25 times ``seconds``, or
+    ``whole``, in all: CMA-ES replays :data:`SEARCH_SECONDS` of logs longer than STAGE_SECONDS).
 
     Longer logs give the PIECE_SECONDS windows where the cart stops and starts most often, then travels most (breakaways and sticking tell the
     friction apart), up to ``seconds`` (default STAGE_SECONDS) in all, not overlapping, each starting on a state estimate of its log; given the
@@ -375,7 +376,7 @@ def _pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int],
     fitted the gain 20 % low), then the others.
     """
     seconds = STAGE_SECONDS if seconds is None else seconds
-    if sum(log.duration for log in logs) <= seconds * 1.25:
+    if sum(log.duration for log in logs) <= max(seconds * 1.25, whole):
         return [(log, j, 0) for j, log in enumerate(logs)]
     candidates = []
     for j, log in enumerate(logs):
@@ -535,13 +536,6 @@ def _rival(setup: _Setup, theta: np.ndarray, cost: float) -> None:
     """Keeps a minimum a search stage found, its cost on what was searched (see :data:`RIVAL_SIGMAS`)."""
     if math.isfinite(cost):
         setup.rivals.append((np.array(theta, dtype=float), float(cost)))
-
-
-def _search_pieces(logs: Sequence[RampLog], interval_samples: Callable[[RampLog], int], step: float | None) -> list[tuple[RampLog, int, int]]:
-    """What CMA-ES replays (:data:`SEARCH_SECONDS`): whole logs up to STAGE_SECONDS in all, pieces of longer ones."""
-    if sum(log.duration for log in logs) <= STAGE_SECONDS:
-        return [(log, j, 0) for j, log in enumerate(logs)]
-    return _pieces(logs, interval_samples, min(SEARCH_SECONDS, STAGE_SECONDS), step)
 
 
 def _sampled(setup: _Setup, answer: _Answer) -> list[_polish.Anchors]:
@@ -1098,7 +1092,7 @@ def fit_parameters(
     setup = _Setup(
         logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
         space=_polish.Space(params0, names, scales, lower, upper, prior), stride=stride,
-        pieces=_pieces(logs, stride, step=rest_step), search_pieces=_search_pieces(logs, stride, rest_step),
+        pieces=_pieces(logs, stride, step=rest_step), search_pieces=_pieces(logs, stride, min(SEARCH_SECONDS, STAGE_SECONDS), rest_step, STAGE_SECONDS),
         voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
     )
     if not _replay.prepare(params0, [log.period for log in logs], names):
