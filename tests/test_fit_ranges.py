@@ -78,13 +78,13 @@ def test_another_minimum_the_search_found_bounds_or_widens_what_it_moves(monkeyp
     assert beq_move < RIVAL_APART
     result = fit_module._result
 
-    def injected(setup, answer, start_values, t_start):
+    def injected(setup, answer, prof, start_values, t_start):
         near, far = answer.polished.theta.copy(), answer.polished.theta.copy()
         near[setup.names.index("F2")] *= 1.3
         near[setup.names.index("Beq")] *= 1 + beq_move
         far[setup.names.index("force_gain")] *= 1.5  # replays 2.5 times worse: says nothing
         setup.rivals += [(near, 1.05 * answer.polished.cost), (far, 2.5 * answer.polished.cost)]
-        return result(setup, answer, start_values, t_start)
+        return result(setup, answer, prof, start_values, t_start)
 
     monkeypatch.setattr(fit_module, "_result", injected)
     rivalled = fit_parameters([log], lab)
