@@ -54,6 +54,10 @@ class Anchors:
         segments = self.segments[(self.segments >= start) & (self.segments < stop)] - start
         return Anchors(self.V[start:stop], self.t[start:stop], self.measured[start:stop], self.sigma, x0, restarts, segments, self.denoised)
 
+    def at_rest(self) -> "Anchors":
+        """These anchors with the cart at rest at the first sample (its speed 0; the smoothed speed there may be the smoothing's edge)."""
+        return replace(self, x0=np.r_[self.x0[0], 0.0, self.x0[2:]])
+
     def first_stretch(self) -> "Anchors":
         """The steps up to the first restart (all of them if there is none)."""
         return self.crop(0, int(self.segments[1]) if self.segments.size > 1 else self.n)

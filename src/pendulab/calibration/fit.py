@@ -14,8 +14,9 @@ of them (:func:`_pieces`). An upright pendulum's replay restarts from the observ
 
 *Stage 2, the polish* (:mod:`pendulab.calibration._polish`) on the replay under the true law: scans of the thresholds and along what slow logs confuse
 (the common scale of gain, forces and drags; the drag's ``B``/``Beq`` split), a pattern search, walks along the corner ``F2, v2``; CMA-ES
-(:func:`_evolved`, :func:`_rescanned`; with the pendulum, stages 1 and 2 again from the global search's answer, :func:`_searched_again`); the common scale where the cart stays in the slip region (:func:`_in_the_slip_region_only`); a voltage logged
-a sample off (:data:`LAG_ABOVE_STEPS`). A noisy logged voltage is replayed denoised (:func:`_voltage_shift` floors the uncertainties).
+(:func:`_evolved`, :func:`_rescanned`; with the pendulum, stages 1 and 2 again from the global search's answer, :func:`_searched_again`); the common
+scale where the cart stays in the slip region (:func:`_in_the_slip_region_only`); a voltage logged a sample off (:data:`LAG_ABOVE_STEPS`). A noisy
+logged voltage is replayed denoised (:func:`_voltage_shift` floors the uncertainties).
 
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state (each rest of the cart; an upright pendulum every
 0.25 s); the RMS and largest position error are reported and stored in the calibration file. A few stretches whose replay diverges are left out
@@ -598,16 +599,14 @@ def _observer_search(setup: _Setup) -> _Candidate:
             x0 = _polish.settled(a.first_stretch(), vector[0], names).x0
             replays[j], logged[j] = replace(a, x0=x0), replace(logged[j], x0=x0)
         elif abs(a.x0[1]) > FIRST_AT_REST and _from_rest_better(space, a, found.theta):
-            x0 = np.r_[a.x0[0], 0.0, a.x0[2:]]
-            replays[j], logged[j] = replace(a, x0=x0), replace(logged[j], x0=x0)
+            replays[j], logged[j] = a.at_rest(), logged[j].at_rest()
     return _Candidate(found.theta, found.iterations, rms_observed, whole, replays, logged, starts[1] if len(starts) > 1 else None)
 
 
 def _from_rest_better(space: _polish.Space, a: _polish.Anchors, theta: np.ndarray) -> bool:
     """Whether the first stretch of ``a`` (to its first restart) replays better from rest than from its smoothed first speed, at ``theta``."""
     first = a.first_stretch()
-    at_rest = replace(first, x0=np.r_[first.x0[0], 0.0, first.x0[2:]])
-    return _polish.costs([at_rest], space, theta[None])[0] < _polish.costs([first], space, theta[None])[0]
+    return _polish.costs([first.at_rest()], space, theta[None])[0] < _polish.costs([first], space, theta[None])[0]
 
 
 def _polished(setup: _Setup, candidate: _Candidate) -> _Answer:
@@ -663,7 +662,8 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
     from the start (:data:`GLOBAL_ABOVE_STEPS`). With the pendulum, whose replay costs several times the cart's, not ``"search"``, and ``"start"``
     with one seed (about 15 CPU-s on an 8 s closed loop)."""
     searched, space, result = answer.searched, setup.space, answer.polished
-    above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, GLOBAL_SEEDS[: 1 if setup.with_pendulum else None])}[start]
+    global_seeds = GLOBAL_SEEDS[:1] if setup.with_pendulum else GLOBAL_SEEDS
+    above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, global_seeds)}[start]
     if answer.rms <= above * setup.step or (start == "search" and setup.with_pendulum) or len(setup.names) < 2:  # one parameter: the polish's scans
         return answer
     sampled = _sampled(setup, answer)
@@ -863,7 +863,7 @@ def _spread(setup: _Setup, answer: _Answer, theta: np.ndarray, determined: list[
     J = ((R[1 : 1 + len(determined)] - R[1 + len(determined) :]) / (2 * size[:, None])).T
     variants = {"the voltage's alignment": [[replace(a, V=shifted_voltage(a.V, shift)) for a in logs] for shift in LAG_SPREAD_SHIFTS]}
     if logs is answer.replays and any(FIRST_AT_REST < abs(a.x0[1]) <= MOVING_START for a in logs):  # whole logs, from their first samples
-        variants["the first state's speed"] = [[replace(a, x0=np.r_[a.x0[0], 0.0, a.x0[2:]]) for a in logs]]
+        variants["the first state's speed"] = [[a.at_rest() for a in logs]]
     for name, anchors in variants.items():
         for varied in anchors:
             e = errors(varied, theta[None])[0]
@@ -893,8 +893,10 @@ def _profiled(setup: _Setup, answer: _Answer, hopped: frozenset[str] = frozenset
                 continue
             found = _polish.polish(searched, space, there, max_iter=POLISH_ITER, scan=())
             _rival(setup, found.theta, found.cost)
+            if found.cost >= answer.polished.cost:
+                continue
             rms = _replay_rms(setup, answer.replays, found.theta)
-            if found.cost < answer.polished.cost and rms < answer.rms:
+            if rms < answer.rms:
                 setup.progress(f"{names[j]} moved {math.expm1(offset):+.0%} with the others polished replays better than the answer, and the polish from "
                                f"there: cost {answer.polished.cost:.4g} -> {found.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
                 answer = _Answer(answer.candidate, answer.polished.then(found, replays=held.replays), searched, answer.replays, rms)
