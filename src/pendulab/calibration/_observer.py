@@ -68,7 +68,7 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
     rows = []
     for a in logs:
         ny = a.measured.shape[1]
-        predicted = observe(vectors, a.V, a.t, a.measured, a.x0, observer_gain(omega, sample_period(a.t), outputs=ny), free=space.names)
+        predicted = observe(vectors, a.V, a.t, a.measured, a.x0, observer_gain(omega, sample_period(a.t), outputs=ny), free=space.inputs)
         rows.append(((predicted - a.measured[None]) / a.sigma[None, None, :ny]).reshape(len(vectors), -1))
     return space.with_prior(np.nan_to_num(np.concatenate(rows, axis=1), nan=1e6, posinf=1e6, neginf=-1e6), np.atleast_2d(thetas))
 

@@ -314,6 +314,8 @@ class Space:
     """The fitted parameters as the search sees them: scaled values ``theta`` (value / scale).
 
     ``params0`` gives every parameter not fitted; ``lower``/``upper`` bound ``theta``; ``prior`` is ``(centre, weight)`` of the weak prior, or None.
+    ``inputs`` are the compiled replay's parameter inputs (default ``names``): a parameter :meth:`holding` holds stays one, its value in every set,
+    not a constant compiled in (each held value compiled its own replay, 3 s of gcc each: a third of the fit tests' compiles).
     """
 
     params0: PlantParameters
@@ -322,7 +324,11 @@ class Space:
     lower: np.ndarray
     upper: np.ndarray
     prior: tuple[np.ndarray, float] | None = None
+    inputs: tuple[str, ...] = ()
     _memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "inputs", self.inputs or self.names)  # frozen
 
     def memo(self, logs: list[Anchors]) -> dict[bytes, float]:
         """The costs replayed so far on ``logs`` by their sets' bytes (the logs kept with them: their ids stay theirs)."""
@@ -351,7 +357,7 @@ class Space:
         j = self.names.index(name)
         keep = [i for i in range(len(self.names)) if i != j]
         return Space(self.params0.with_values(**{name: float(value * self.scales[j])}), tuple(self.names[i] for i in keep), self.scales[keep],
-                     self.lower[keep], self.upper[keep], None if self.prior is None else (self.prior[0][keep], self.prior[1]))
+                     self.lower[keep], self.upper[keep], None if self.prior is None else (self.prior[0][keep], self.prior[1]), self.inputs)
 
     def with_prior(self, r: np.ndarray, thetas: np.ndarray) -> np.ndarray:
         """Errors ``r`` ``(m, n_errors)`` of ``thetas`` ``(m, n)`` and the prior's residuals beside them."""
@@ -372,7 +378,7 @@ def costs(logs: list[Anchors], space: Space, thetas: np.ndarray) -> np.ndarray:
     new = list(dict.fromkeys(k for k in keys if k not in memo))
     if new:
         X = np.array([np.frombuffer(k) for k in new])
-        R = space.with_prior(np.nan_to_num(replay_errors(logs, space.vectors(X), space.names), nan=1e6), X)
+        R = space.with_prior(np.nan_to_num(replay_errors(logs, space.vectors(X), space.inputs), nan=1e6), X)
         memo.update(zip(new, np.einsum("ij,ij->i", R, R)))
     return np.array([memo[k] for k in keys])
 
@@ -738,7 +744,7 @@ def profile(logs: list[Anchors], space: Space, theta: np.ndarray, step: float = 
         trials += [moved(space, theta, d, sign * o * widths[d]) for sign in (1.0, -1.0) for o in offsets]
     size = step * np.abs(theta)
     trials += list(theta + np.diag(size)) + list(theta - np.diag(size))
-    R = np.nan_to_num(replay_errors(logs, space.vectors(np.clip(np.array(trials), space.lower, space.upper)), space.names), nan=1e6)
+    R = np.nan_to_num(replay_errors(logs, space.vectors(np.clip(np.array(trials), space.lower, space.upper)), space.inputs), nan=1e6)
     costs = np.einsum("ij,ij->i", R, R)
     r0, cost0 = R[0], float(costs[0])
     k = correlation_length(r0, [a.measured.size for a in logs])
