@@ -21,7 +21,7 @@ def test_the_compiled_step_divides_by_no_constant():
     # The cart's step divides only by constants (masses, motor constants, the RK4 weights): none is left.
     divisions = [k for k in range(step.n_instructions()) if step.instruction_id(k) == ca.OP_DIV]
     assert not divisions, f"{len(divisions)} divisions left"
-    assert step.n_instructions() > 1000  # ten RK4 sub-steps of the cart, not an empty function
+    assert step.n_instructions() > 200  # an RK4 sub-step of the cart (330 instructions), not an empty function
 
 
 @pytest.mark.parametrize("shape", ["chirp", "random steps"])

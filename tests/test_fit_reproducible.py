@@ -47,7 +47,7 @@ def test_the_replay_of_many_sets_equals_the_plant_simulated_set_by_set(stride):
     """The compiled replay (parameter sets in vector lanes, a short last group, arrays passed in place) against
     :meth:`pendulab.model.plant.PlantModel.simulate`, the plant's RK4 step in CasADi's virtual machine
     one set at a time with every parameter an input: the same states, sample by sample, for every set. At 1 kHz,
-    and at 100 Hz (100 sub-steps a sample, in chunks: unrolled, gcc took more than 5 minutes over them)."""
+    and at 100 Hz (100 sub-steps a sample, looped by the driver: unrolled, gcc took more than 5 minutes over them)."""
     import numpy as np
     from fit_helpers import simulate
 
@@ -77,7 +77,7 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer, 
     """The replay (with restarts) and the observer of the position and the angle, built for 1, 2, 4 and 8 lanes
     in one group or 4 interleaved, against the same step evaluated in CasADi's virtual machine: equal bit for bit,
     for the pendulum's sines and cosines too (taken lane by lane from the C library, as the virtual machine takes them).
-    A 1 kHz log, and one of 3 ms (30 sub-steps a sample, run as 3 chunks of 10). Each build is checked on the replay
+    A 1 kHz log, and one of 3 ms (30 sub-steps a sample). Each build is checked on the replay
     and on the observer, at each rate (two builds a case: gcc's time is most of this test's)."""
     import casadi as ca
     import numpy as np
@@ -93,7 +93,7 @@ def test_every_vector_width_gives_the_bits_of_casadis_virtual_machine(observer, 
     base = np.asarray(PlantParameters.preset("long").as_vector(), dtype=float)
     sets = base * np.exp(np.random.default_rng(3).normal(0.0, 0.2, (5, base.size)))
     key, P, h = _replay._key(sets, log.t, free)
-    assert key[0] == 10 * stride and _replay._chunk(key[0]) == 10
+    assert key[0] == 10 * stride  # sub-steps per sample, looped by the driver
     x0 = np.array([0.0, 0.0, 0.05, 0.0])
     if observer:
         y = np.column_stack([log.x, 0.02 * np.sin(3 * log.t)])

@@ -11,7 +11,6 @@ of sets on the machine's cores (OpenMP); without a compiler CasADi's virtual mac
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
 import sys
 from functools import lru_cache
@@ -60,8 +59,8 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
         vd s[WAYS][4], ns[WAYS][4], th[WAYS][NTH];
         start_group(g, m, x0, P, s, th);
         for (int k = 0; k < n; ++k) {
-            for (int j = 0; j < CHUNKS; ++j) {  /* the sample's sub-steps, SUB at a time (see _chunk) */
-                step(s, V[k], j ? t[k] + j * (SUB * h) : t[k], j ? 0.0 : r[k], sr + 4 * (size_t)k, th, h, ns);
+            for (int j = 0; j < NSUB; ++j) {  /* the sample's sub-steps, one at a time (see _step) */
+                step(s, V[k], j ? t[k] + j * h : t[k], j ? 0.0 : r[k], sr + 4 * (size_t)k, th, h, ns);
                 for (int w = 0; w < WAYS; ++w)
                     for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
             }
@@ -84,8 +83,8 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
         vd s[WAYS][4], ns[WAYS][4], pm[WAYS][NY], th[WAYS][NTH];
         start_group(g, m, x0, P, s, th);
         for (int k = 0; k < n; ++k) {
-            for (int j = 0; j < CHUNKS; ++j) {  /* corrected after the last chunk only (c = 1) */
-                step(s, V[k], j ? t[k] + j * (SUB * h) : t[k], y + NY * (size_t)k, gain, j == CHUNKS - 1, th, h, ns, pm);
+            for (int j = 0; j < NSUB; ++j) {  /* corrected after the last sub-step only (c = 1) */
+                step(s, V[k], j ? t[k] + j * h : t[k], y + NY * (size_t)k, gain, j == NSUB - 1, th, h, ns, pm);
                 for (int w = 0; w < WAYS; ++w)
                     for (int i = 0; i < 4; ++i) s[w][i] = ns[w][i];
             }
@@ -100,25 +99,17 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
 """
 
 
-#: At most this many RK4 sub-steps are unrolled in the compiled step, more run in chunks (:func:`_chunk`): 100 (a 100 Hz log's) took gcc over 5 min.
-MAX_UNROLLED = 10
-
-
-def _chunk(n_sub: int) -> int:
-    """The sub-steps of one chunk: the largest divisor of ``n_sub`` up to :data:`MAX_UNROLLED`."""
-    return max(d for d in range(1, MAX_UNROLLED + 1) if n_sub % d == 0)
-
-
 @lru_cache(maxsize=None)
 def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One chunk (:func:`_chunk` of ``n_sub`` sub-steps) of a replay sample, or the observer's with ``observer`` outputs (1: x; 2: x, alpha).
+    """One RK4 sub-step of a replay sample (``n_sub`` of them), or the observer's with ``observer`` outputs (1: x; 2: x, alpha).
 
     The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where ``r > 0.5``, its positions only, the speeds
     carried on, where ``r > 1.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny], corrected[4])``,
-    the correction times ``c`` (1 after a sample's last chunk, else 0). Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are
+    the correction times ``c`` (1 after a sample's last sub-step, else 0). Only the parameters ``free`` (indices into :meth:`PlantParameters.names`) are
     inputs; the others are the constants ``fixed``, so that a cart without a pendulum loses every pendulum term.
     """
-    step = step_function(False, _chunk(n_sub)).expand()
+    # One sub-step, looped by the C driver: a sample's 10 unrolled compiled 5 times slower (3-5 s of gcc per replay), ran 1-11 % slower, same bits.
+    step = step_function(False, 1).expand()
     s, V, t, h = ca.SX.sym("s", 4), ca.SX.sym("V"), ca.SX.sym("t"), ca.SX.sym("h")
     theta = ca.SX.sym("theta", len(free))
     p = ca.vertcat(*(theta[free.index(i)] if i in free else ca.SX(v) for i, v in enumerate(fixed)))  # free: its symbol
@@ -156,14 +147,13 @@ def _by_reciprocals(f: ca.Function) -> ca.Function:
 
 @lru_cache(maxsize=None)
 def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One whole sample for CasADi's VM: :func:`_step`'s chunks as the compiled drivers run them (same operations, same bits), without ``c``."""
-    one, sub = _step(n_sub, free, fixed, observer), _chunk(n_sub)
+    """One whole sample for CasADi's VM: :func:`_step`'s sub-steps as the compiled drivers run them (same operations, same bits), without ``c``."""
+    one = _step(n_sub, free, fixed, observer)
     ins = [ca.SX.sym(one.name_in(i), one.sparsity_in(i)) for i in range(one.n_in())]
     s, V, t, h = ins[0], ins[1], ins[2], ins[-1]
-    chunks = n_sub // sub
-    for j in range(chunks):
-        tj = t + j * (sub * h) if j else t
-        out = one.call([s, V, tj, *ins[3:5], float(j == chunks - 1), *ins[6:]] if observer else [s, V, tj, ins[3] if j == 0 else 0.0, *ins[4:]])
+    for j in range(n_sub):
+        tj = t + j * h if j else t
+        out = one.call([s, V, tj, *ins[3:5], float(j == n_sub - 1), *ins[6:]] if observer else [s, V, tj, ins[3] if j == 0 else 0.0, *ins[4:]])
         s = out[0]
     return ca.Function(one.name(), [x for i, x in enumerate(ins) if not (observer and i == 5)], out)
 
@@ -177,7 +167,7 @@ def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
     # The next state, and the observer's predicted outputs (its third output, the next state again, is not stored).
     outputs = [lambda j, e, g: f"ns[{g}][{j}] = {e};", lambda j, e, g: f"pm[{g}][{j}] = {e};", lambda j, e, g: ""][: one.n_out()]
     defines = (f"#define WAYS {ways}\n#define NFREE {len(free)}\n#define NTH {max(len(free), 1)}\n#define NY {max(observer, 1)}\n"
-               f"#define SUB {_chunk(n_sub)}\n#define CHUNKS {n_sub // _chunk(n_sub)}\n")
+               f"#define NSUB {n_sub}\n")
     return simd.PRELUDE + defines + _GROUP + (_OBSERVE if observer else _REPLAY).replace("STEP", simd.statements(one, inputs, outputs, ways))
 
 
@@ -202,8 +192,8 @@ def _load(source: str, name: str, flags: Sequence[str]):
 def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, single: bool = False):
     """:func:`_source` built once per machine (:func:`pendulab.native.shared_library`): in :func:`pendulab.simd.lanes` lanes, :data:`WAYS` groups of
     them (``single``: one lane, for a lone set), for the machine's own vector width (else the baseline's); None without a compiler."""
-    tag = hashlib.sha256(repr((n_sub, free, fixed, observer)).encode()).hexdigest()[:10]
-    name = f"pendulab_{'observe' if observer else 'replay'}_{tag}"
+    # Named by its C alone (shared_library hashes it with the flags): keys that give the same C share one build.
+    name = f"pendulab_{'observe' if observer else 'replay'}"
     source = _source(n_sub, free, fixed, observer, 1 if single else WAYS)
     width = 1 if single else simd.lanes(_step(n_sub, free, fixed, observer))
     lanes = (f"-DLANES={width}",) if width else ()
