@@ -21,6 +21,7 @@ logged voltage is replayed denoised (:func:`_voltage_shift` floors the uncertain
 *Check.* The whole logs are replayed with the answer, restarted only where the log gives the state (each rest of the cart; an upright pendulum every
 0.25 s); the RMS and largest position error are reported and stored in the calibration file. A few stretches whose replay diverges are left out
 (:data:`DIVERGED_SHARE`). ``pendulab fit`` refuses (exit status 3) an answer whose replay misses by more than :attr:`FitResult.forward_limit`.
+Missing by more than :data:`CONFIDENT_STEPS`, the cart's or a pendulum's angle (:func:`confidence_of`), it claims nothing determined.
 
 *What the logs determine* (:func:`pendulab.calibration._polish.profile`): a replay cost rising by one effective chi-square unit both ways along a
 parameter makes it *determined*, one way only *bounded*, flat *not identified* (it keeps its start); ``v1`` is at most bounded (:data:`V1_SCATTER`); a
