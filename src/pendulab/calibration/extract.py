@@ -88,17 +88,13 @@ def motor_constants(params: PlantParameters) -> tuple[float, float]:
 class PushEstimate:
     """What one push (a ramp or a probe, and its release) measured; ``None`` where it could not tell."""
 
-    kind: str  # "ramp" | "probe"
-    direction: int
     t_start: float
-    t_release: float
     F1: float | None = None
     v1: float | None = None
     F2: float | None = None
     v2: float | None = None
     B: float | None = None
     Beq: float | None = None
-    decay_rms: float | None = None  # residual of the coasting fit (m)
 
 
 @dataclass(frozen=True)
@@ -334,7 +330,6 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
         F1 = K * abs(_onset_voltage(t, V, x, x_rest, direction, j, k)) if kind == "ramp" and j < push.release - 1 else None
         onsets[push.start] = j
         values: dict[str, float | None] = {"v1": None, "v2": None, "B": None, "Beq": None}
-        rms = None
         r = push.release
         powered = np.flatnonzero(np.abs(V[r:]) > _ZERO)
         e = r + int(powered[0]) if powered.size else len(V)
@@ -347,7 +342,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
                 values["Beq"] = Beq
                 if v2 < 0.95 * u0:  # the cart coasted freely first: the drag phase started at v2
                     values.update(v2=v2, B=B, v1=v1 if v1 < 0.95 * v2 else None)
-        estimates.append(PushEstimate(kind, direction, float(t[push.start]), float(t[min(push.release, len(t) - 1)]), F1=F1, decay_rms=rms, **values))
+        estimates.append(PushEstimate(float(t[push.start]), F1=F1, **values))
     if not any(e.F1 is not None for e in estimates):
         raise CalibrationError(f"{where} ({log.duration:.3g} s) contains no breakaway: the cart never started moving on a ramp from rest; "
                                "the log is too short or the ramps stop too early")
