@@ -160,20 +160,19 @@ def _closed_loop_run(rig: PlantParameters, duration: float) -> tuple[np.ndarray,
     return _frozen(*(np.array(c[k], dtype=float) for k in ("t", "voltage", "x", "alpha_measured")))
 
 
-def calibrate_ramp_log(rig: PlantParameters = TRUE, *, iterations: int = 1, noise: float = 1e-5, voltage_noise: float = 0.0,
-                       seed: int = 0, x0: float = 0.05) -> RampLog:
+def calibrate_ramp_log(rig: PlantParameters = TRUE, *, iterations: int = 1, noise: float = 1e-5, voltage_noise: float = 0.0, seed: int = 0) -> RampLog:
     """The ``pendulab calibrate`` ramp test, run by the same program on the virtual rig with ``rig``."""
-    t, V, x = _calibrate_ramp_run(rig, iterations, float(x0))
+    t, V, x = _calibrate_ramp_run(rig, iterations)
     return _measured(t.copy(), V, x, rig.q_x, noise, voltage_noise, seed, "synthetic calibrate ramp test")
 
 
 @lru_cache(maxsize=RUNS_CACHED)
-def _calibrate_ramp_run(rig: PlantParameters, iterations: int, x0: float) -> tuple[np.ndarray, ...]:
+def _calibrate_ramp_run(rig: PlantParameters, iterations: int) -> tuple[np.ndarray, ...]:
     """:func:`calibrate_ramp_log`'s run: time, voltage and position as the ramp test logged them."""
     from pendulab.calibration.ramp import run_ramp_test
     from pendulab.calibration.rig import VirtualRig
 
-    with VirtualRig(rig, x0=x0) as virtual:
+    with VirtualRig(rig) as virtual:
         log = run_ramp_test(virtual, iterations=iterations)
     return _frozen(*(np.array(a, dtype=float) for a in (log.t, log.V, log.x)))
 
