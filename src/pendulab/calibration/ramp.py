@@ -25,7 +25,7 @@ Examples
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -163,7 +163,6 @@ def run_ramp_test(
     rig: Rig,
     iterations: int = 5,
     *,
-    settings: RampSettings | None = None,
     on_iteration: Callable[[int, int], None] | None = None,
     on_progress: Callable[[str], None] | None = None,
     **overrides: float,
@@ -176,12 +175,12 @@ def run_ramp_test(
         The real rig (HIL) or a :class:`~pendulab.calibration.rig.VirtualRig`.
     iterations : int
         Number of iterations (default 5); each ramps in both directions.
-    settings : RampSettings, optional
-        Rates, distances, limits; ``**overrides`` replace single fields.
     on_iteration : callable(i, n), optional
         Called at the start of iteration ``i`` (1-based) of ``n``.
     on_progress : callable(str), optional
         Short progress messages (breakaways, track limits).
+    **overrides : float
+        Fields of :class:`RampSettings` (rates, distances, limits) to change from their defaults.
 
     Returns
     -------
@@ -193,7 +192,7 @@ def run_ramp_test(
     unknown = sorted(set(overrides) - set(RampSettings.__dataclass_fields__))
     if unknown:
         raise CalibrationError(f"unknown ramp setting {unknown[0]!r}; known ones are {', '.join(RampSettings.__dataclass_fields__)}")
-    settings = replace(settings or RampSettings(), **overrides)
+    settings = RampSettings(**overrides)
     progress = on_progress or (lambda text: None)
     run = _Run(rig, settings)
     interrupted, reason, done, done_at = False, "", 0, 0.0
