@@ -48,7 +48,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Iterable, NamedTuple, Sequence
 
@@ -473,11 +472,6 @@ def _used(log: RampLog, stride: int) -> int:
     return ((len(log) - 1) // stride) * stride + 1
 
 
-def _stride(log: RampLog, interval: float) -> int:
-    """Samples between the state estimates (``interval`` seconds apart) of ``log``."""
-    return max(1, int(round(interval / log.period)))
-
-
 @dataclass
 class _Setup:
     """What every stage of one fit shares: the logs, the fitted names with their scaling and bounds, the settings."""
@@ -488,7 +482,7 @@ class _Setup:
     scales: np.ndarray  # theta = value / scale
     theta0: np.ndarray  # the start, scaled
     space: _polish.Space
-    stride: Callable[[RampLog], int]  # samples between the state estimates of a log (:func:`_stride`)
+    stride: Callable[[RampLog], int]  # samples between the state estimates of a log (``interval`` seconds apart, :func:`fit_parameters`)
     pieces: list[tuple[RampLog, int, int]]  # what the polish sees of long logs (:func:`_pieces`)
     search_pieces: list[tuple[RampLog, int, int]]  # what CMA-ES sees (:data:`SEARCH_SECONDS`)
     voltage_noise: float  # the logged voltage's sample noise (V; the largest over the logs)
@@ -1094,7 +1088,10 @@ def fit_parameters(
         raise CalibrationError(f"cannot fit {unknown[0]!r}; choose among {', '.join(FITTABLE)}")
     if not names:
         raise CalibrationError("nothing to fit; name at least one parameter")
-    stride = partial(_stride, interval=interval)  # samples between the state estimates of a log
+
+    def stride(log: RampLog) -> int:  # samples between the state estimates of a log (``interval`` seconds apart)
+        return max(1, int(round(interval / log.period)))
+
     most_lag = min((len(log) for log in logs), default=0) // 10  # a tenth of the shortest log
     if not isinstance(voltage_lag, (int, np.integer)) or abs(voltage_lag) > most_lag:
         raise CalibrationError(f"voltage lag {voltage_lag!r}: give a whole number of samples, at most a tenth of the shortest log ({most_lag})")
