@@ -179,12 +179,11 @@ def _calibrate_ramp_run(rig: PlantParameters, iterations: int) -> tuple[np.ndarr
 
 @dataclass(frozen=True)
 class Case:
-    """One corpus case: a shape on a rig, with or without voltage noise."""
+    """One corpus case: a shape on a rig (16 s of it, the closed loop 8 s), with or without voltage noise."""
 
     shape: str
     rig: str
     voltage_noise: float
-    duration: float = 16.0
 
     @property
     def name(self) -> str:
@@ -197,10 +196,10 @@ class Case:
 
     def log(self) -> RampLog:
         if self.shape == "closed loop":
-            return closed_loop_log(RIGS[self.rig], duration=min(self.duration, 8.0), voltage_noise=self.voltage_noise)
+            return closed_loop_log(RIGS[self.rig], voltage_noise=self.voltage_noise)
         if self.shape == "calibrate ramp":
             return calibrate_ramp_log(RIGS[self.rig], voltage_noise=self.voltage_noise)
-        return synthetic_log(self.shape, RIGS[self.rig], duration=self.duration, voltage_noise=self.voltage_noise)
+        return synthetic_log(self.shape, RIGS[self.rig], duration=16.0, voltage_noise=self.voltage_noise)
 
 
 def corpus() -> list[Case]:
