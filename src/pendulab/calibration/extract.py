@@ -88,10 +88,8 @@ def motor_constants(params: PlantParameters) -> tuple[float, float]:
 class PushEstimate:
     """What one push (a ramp or a probe, and its release) measured; ``None`` where it could not tell."""
 
-    t_start: float
     F1: float | None = None
     v1: float | None = None
-    F2: float | None = None
     v2: float | None = None
     B: float | None = None
     Beq: float | None = None
@@ -342,7 +340,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
                 values["Beq"] = Beq
                 if v2 < 0.95 * u0:  # the cart coasted freely first: the drag phase started at v2
                     values.update(v2=v2, B=B, v1=v1 if v1 < 0.95 * v2 else None)
-        estimates.append(PushEstimate(float(t[push.start]), F1=F1, **values))
+        estimates.append(PushEstimate(F1=F1, **values))
     if not any(e.F1 is not None for e in estimates):
         raise CalibrationError(f"{where} ({log.duration:.3g} s) contains no breakaway: the cart never started moving on a ramp from rest; "
                                "the log is too short or the ramps stop too early")
@@ -379,10 +377,8 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
             lo = max(0, push.start - 20)
             F_high = K * float(np.max(np.abs(V[push.start : push.release]))) if push.release > push.start else 0.0
             F2 = _fit_F2(log, lo, hi, fit_params, measured["F1"], 1.05 * F_high)
-        if F2 is None:
-            continue
-        found[kind].append(F2)
-        estimates = [replace(e, F2=F2) if abs(e.t_start - t[push.start]) < 0.5 * dt else e for e in estimates]
+        if F2 is not None:
+            found[kind].append(F2)
     # A slow ramp resolves F2 far better than a probe (whose force jumps by rate*dt per sample).
     F2_values = found["ramp"] or found["probe"]
     counts["F2"] = len(F2_values)
