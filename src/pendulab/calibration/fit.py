@@ -477,11 +477,9 @@ class _Setup:
     """What every stage of one fit shares: the logs, the fitted names with their scaling and bounds, the settings."""
 
     logs: list[RampLog]
-    params0: PlantParameters  # the start (after :func:`ramp_start`) and every parameter not fitted
     names: tuple[str, ...]
-    scales: np.ndarray  # theta = value / scale
     theta0: np.ndarray  # the start, scaled
-    space: _polish.Space
+    space: _polish.Space  # theta = value / scale; its params0: the start (after :func:`ramp_start`) and every parameter not fitted
     stride: Callable[[RampLog], int]  # samples between the state estimates of a log (``interval`` seconds apart, :func:`fit_parameters`)
     pieces: list[tuple[RampLog, int, int]]  # what the polish sees of long logs (:func:`_pieces`)
     search_pieces: list[tuple[RampLog, int, int]]  # what CMA-ES sees (:data:`SEARCH_SECONDS`)
@@ -491,12 +489,12 @@ class _Setup:
 
     @property
     def with_pendulum(self) -> bool:
-        return self.params0.Mp > 0
+        return self.space.params0.Mp > 0
 
     @property
     def step(self) -> float:
         """The cart encoder's step (m)."""
-        return float(self.params0.q_x)
+        return float(self.space.params0.q_x)
 
     @property
     def denoise(self) -> bool:
@@ -570,10 +568,10 @@ def _observer_search(setup: _Setup) -> _Candidate:
     searched = _pieces_of(setup, replays, whole)
     starts = [theta0]
     if not with_pendulum:  # the logs' own estimate (pendulab.calibration._start.log_start)
-        estimate = setup.params0.with_values(**{n: getattr(log_start(setup.logs, setup.params0), n) for n in names})
-        shown = ", ".join(f"{n}={getattr(estimate, n):.4g}" for n in names if getattr(estimate, n) != getattr(setup.params0, n))
+        estimate = space.params0.with_values(**{n: getattr(log_start(setup.logs, space.params0), n) for n in names})
+        shown = ", ".join(f"{n}={getattr(estimate, n):.4g}" for n in names if getattr(estimate, n) != getattr(space.params0, n))
         setup.progress(f"start estimated from the logs: {shown or 'nothing the logs show'}")
-        starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / setup.scales))
+        starts.append(space.project(np.array([getattr(estimate, n) for n in names]) / space.scales))
     found = _observer.search(searched, space, starts)
     found = replace(found, theta=space.project(exact.significant(found.theta, START_DIGITS)))
     rms_observed = math.sqrt(found.cost / sum(a.measured.size for a in searched)) * float(np.mean([a.sigma[0] for a in searched]))
@@ -747,7 +745,7 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
     searched, result, names = answer.searched, answer.polished, setup.names
     if "scale" not in _polish.directions_of(names):
         return answer
-    params = setup.params0.with_values(**dict(zip(names, result.theta * setup.scales)))
+    params = setup.space.params0.with_values(**dict(zip(names, result.theta * setup.space.scales)))
     vector = np.asarray(params.as_vector(), dtype=float)[None, :]
     regimes = [slip_shares(params, a.V, _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]) for a in answer.replays]
     if not slip_only(*(sum(r[k] for r in regimes) for k in (0, 1))):
@@ -778,7 +776,7 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
         return answer
     k = names.index("force_gain")
     setup.progress(f"the cart stays in the slip region, where only its inertia shows the common scale of the gain, forces and drags: "
-                   f"searched along it, force gain {answer.polished.theta[k] * setup.scales[k]:.4g} -> {result.theta[k] * setup.scales[k]:.4g}, "
+                   f"searched along it, force gain {answer.polished.theta[k] * setup.space.scales[k]:.4g} -> {result.theta[k] * setup.space.scales[k]:.4g}, "
                    f"cost {answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
     return _Answer(answer.candidate, result, searched, answer.replays, rms)
 
@@ -901,7 +899,7 @@ def _profiled(setup: _Setup, answer: _Answer, hopped: frozenset[str] = frozenset
 
 def _result(setup: _Setup, answer: _Answer, prof: _polish.Profile, start_values: np.ndarray, t_start: float) -> FitResult:
     """Stage 3: the answer's uncertainties from its profile ``prof`` (:func:`_profiled`), and its check (the whole logs replayed): the fit's result."""
-    names, scales, space, params0 = setup.names, setup.scales, setup.space, setup.params0
+    names, scales, space, params0 = setup.names, setup.space.scales, setup.space, setup.space.params0
     candidate, searched, replays = answer.candidate, answer.searched, answer.replays
     theta_opt = answer.polished.theta
 
@@ -982,7 +980,7 @@ def _result(setup: _Setup, answer: _Answer, prof: _polish.Profile, start_values:
     forward_rms = float(np.sqrt(np.mean(counted**2))) if np.all(np.isfinite(counted)) else math.inf
     forward_max = float(np.max(np.abs(counted))) if np.all(np.isfinite(counted)) else math.inf
     angle = np.concatenate(angles)[~left_out]
-    angle_steps = float(np.sqrt(np.mean(angle**2))) / max(setup.params0.q_alpha, 1e-6) if np.all(np.isfinite(angle)) else math.inf
+    angle_steps = float(np.sqrt(np.mean(angle**2))) / max(params0.q_alpha, 1e-6) if np.all(np.isfinite(angle)) else math.inf
     setup.progress(f"forward simulation of the logs with the fitted values: RMS {forward_rms * 1e6:.1f} um, max {forward_max * 1e6:.1f} um"
                    + (f"; the angle's RMS {angle_steps:.2f} encoder steps" if setup.with_pendulum else ""))
     diverged_note = ""
@@ -1111,7 +1109,7 @@ def fit_parameters(
     prior = (theta0, regularization) if regularization > 0 else None
     rest_step = None if params0.Mp > 0 else float(params0.q_x)  # the cart alone: pieces start at rests (_pieces)
     setup = _Setup(
-        logs=logs, params0=params0, names=names, scales=scales, theta0=theta0,
+        logs=logs, names=names, theta0=theta0,
         space=_polish.Space(params0, names, scales, lower, upper, prior), stride=stride,
         pieces=_pieces(logs, stride, step=rest_step), search_pieces=_pieces(logs, stride, min(SEARCH_SECONDS, STAGE_SECONDS), rest_step, STAGE_SECONDS),
         voltage_noise=max(_polish.voltage_noise(log.V) for log in logs), progress=progress,
