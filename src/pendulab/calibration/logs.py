@@ -278,7 +278,7 @@ def _read_mat(path: Path) -> dict[str, np.ndarray]:
             if array.dtype.kind in "fiub" and array.ndim <= 2 and array.size > 0 and (array.ndim < 2 or 1 in array.shape)}
 
 
-def read_mat_variables(path: str | os.PathLike[str], what: str | None = None) -> dict[str, np.ndarray]:
+def read_mat_variables(path: Path, what: str) -> dict[str, np.ndarray]:
     """Numeric and other arrays of a MATLAB ``.mat`` file, MAT v5 (SciPy) or v7.3 (HDF5, h5py).
 
     v7.3 stores arrays column-major; transposed back to MATLAB's shape. Structs and cell arrays come back as object arrays (v5) or are skipped (v7.3).
@@ -290,8 +290,6 @@ def read_mat_variables(path: str | os.PathLike[str], what: str | None = None) ->
     """
     import scipy.io
 
-    path = Path(path)
-    what = what or f"file {path}"
     try:
         contents = scipy.io.loadmat(str(path), squeeze_me=False)
     except Exception as exc:  # scipy raises several kinds for a corrupt file
