@@ -124,10 +124,8 @@ def log_start(logs: Sequence[RampLog], params0: PlantParameters) -> PlantParamet
     """``params0`` with ``force_gain``, ``Beq`` and ``F1`` (and ``F2`` kept in its ratio to ``F1``) from the logs, and ``B`` and ``v2`` where they show the slip
     region (:func:`slip_region`; ``F2`` then at least the force the cart slid under, :func:`slipping_force`).
 
-    What the logs cannot show keeps ``params0``'s value; logs with the pendulum keep ``params0``.
+    What the logs cannot show keeps ``params0``'s value. Logs of the cart alone (the fit asks only for those).
     """
-    if params0.Mp > 0:
-        return params0
     drive = drive_and_drag(logs, params0)
     values: dict[str, float] = {} if drive is None else {"force_gain": drive[0], "Beq": drive[1]}
     gain = values.get("force_gain", params0.force_gain)
