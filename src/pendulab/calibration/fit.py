@@ -74,14 +74,13 @@ _UPPER = {"F1": 50.0, "v1": 1.0, "F2": 50.0, "v2": 2.0, "B": 2000.0, "Beq": 200.
 
 
 class _LogEstimate(NamedTuple):
-    """A whole log after the search: state estimates each ``stride`` (smoothed, or the observer's with a pendulum), one-sample predictions, noise."""
+    """A whole log after the search: state estimates each ``stride`` (smoothed, or the observer's with a pendulum), one-sample predictions."""
 
     log: RampLog
     used: int
     stride: int
     estimates: np.ndarray  # (n_states, used // stride + 1)
     fitted: np.ndarray
-    sigma: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -557,13 +556,13 @@ def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEs
 def _observer_search(setup: _Setup) -> _Candidate:
     """Stage 1, the observer search (see the module docstring)."""
     names, space, theta0, with_pendulum = setup.names, setup.space, setup.theta0, setup.with_pendulum
-    whole = []
+    whole, logged = [], []
     for log in setup.logs:
         M = setup.stride(log)
         used = _used(log, M)
         sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-        whole.append(_LogEstimate(log, used, M, _initial_states(log, with_pendulum)[:used:M].T.copy(), np.full(used, np.nan), sigma))
-    logged = [_polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, with_pendulum) for e in whole]
+        whole.append(_LogEstimate(log, used, M, _initial_states(log, with_pendulum)[:used:M].T.copy(), np.full(used, np.nan)))
+        logged.append(_polish.anchors(log, used, whole[-1].estimates, M, sigma, setup.step, with_pendulum))
     replays = [_polish.denoised(a) for a in logged] if setup.denoise else list(logged)  # see _Setup.denoise
     searched = _pieces_of(setup, replays, whole)
     starts = [theta0]
@@ -585,7 +584,7 @@ def _observer_search(setup: _Setup) -> _Candidate:
         if with_pendulum:
             every = np.vstack([np.r_[a.x0], states[0]])[:: e.stride]
             e.estimates[:, : every.shape[0]] = every.T
-            restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, e.sigma, setup.step, True)
+            restarted = _polish.anchors(e.log, e.used, e.estimates, e.stride, a.sigma, setup.step, True)
             replays[j] = _polish.settled(restarted, vector[0], names)
         elif abs(a.x0[1]) > MOVING_START:
             # Settled (MOVING_START), not the smoothed speed at its edge: a log cut from a run at 0.4 m/s fitted v2 12 % high, "determined" to 3 %.
@@ -770,15 +769,14 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
         if found.cost >= result.cost:
             return answer
         moved = moved.then(found)
-    result = moved
-    rms = _replay_rms(setup, answer.replays, result.theta)
+    rms = _replay_rms(setup, answer.replays, moved.theta)
     if rms >= answer.rms:  # better on a long log's pieces, worse on the whole: misled (_pieces)
         return answer
     k = names.index("force_gain")
     setup.progress(f"the cart stays in the slip region, where only its inertia shows the common scale of the gain, forces and drags: "
-                   f"searched along it, force gain {answer.polished.theta[k] * setup.space.scales[k]:.4g} -> {result.theta[k] * setup.space.scales[k]:.4g}, "
-                   f"cost {answer.polished.cost:.4g} -> {result.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
-    return _Answer(answer.candidate, result, searched, answer.replays, rms)
+                   f"searched along it, force gain {result.theta[k] * setup.space.scales[k]:.4g} -> {moved.theta[k] * setup.space.scales[k]:.4g}, "
+                   f"cost {result.cost:.4g} -> {moved.cost:.4g}; replay RMS {rms * 1e6:.0f} um")
+    return _Answer(answer.candidate, moved, searched, answer.replays, rms)
 
 
 def _at_scale(setup: _Setup, searched: list[_polish.Anchors], theta: np.ndarray, offset: float) -> _polish.Polished:
