@@ -85,17 +85,6 @@ def motor_constants(params: PlantParameters) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
-class PushEstimate:
-    """What one push (a ramp or a probe, and its release) measured; ``None`` where it could not tell."""
-
-    F1: float | None = None
-    v1: float | None = None
-    v2: float | None = None
-    B: float | None = None
-    Beq: float | None = None
-
-
-@dataclass(frozen=True)
 class FrictionEstimate:
     """The extracted friction vector.
 
@@ -119,7 +108,7 @@ class FrictionEstimate:
     counts: dict[str, int]
     mass_ratio: float
     Beq: float | None
-    pushes: tuple[PushEstimate, ...]
+    pushes: int  # pushes whose cart broke away
     notes: tuple[str, ...] = field(default=())
 
     def to_calibration(self, **metadata: Any) -> Calibration:
@@ -131,7 +120,7 @@ class FrictionEstimate:
             "spread": self.spread,
             "counts": self.counts,
             "Beq_ramp": self.Beq,
-            "pushes": len(self.pushes),
+            "pushes": self.pushes,
             "notes": list(self.notes),
             **metadata,
         }
@@ -304,7 +293,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
                                "(slow ramps until the cart breaks away)")
 
     notes: list[str] = []
-    estimates: list[PushEstimate] = []
+    estimates: list[dict[str, float | None]] = []  # what each push measured (None where it could not tell)
     onsets: dict[int, int] = {}  # push start -> last sample at rest before the breakaway
     w = max(2, int(round(0.02 / dt)))  # 20 ms
     for push in pushes:
@@ -340,8 +329,8 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
                 values["Beq"] = Beq
                 if v2 < 0.95 * u0:  # the cart coasted freely first: the drag phase started at v2
                     values.update(v2=v2, B=B, v1=v1 if v1 < 0.95 * v2 else None)
-        estimates.append(PushEstimate(F1=F1, **values))
-    if not any(e.F1 is not None for e in estimates):
+        estimates.append({"F1": F1, **values})
+    if not any(e["F1"] is not None for e in estimates):
         raise CalibrationError(f"{where} ({log.duration:.3g} s) contains no breakaway: the cart never started moving on a ramp from rest; "
                                "the log is too short or the ramps stop too early")
 
@@ -349,7 +338,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
     spread: dict[str, float] = {}
     counts: dict[str, int] = {}
     for name in ("F1", "v1", "v2", "B", "Beq"):
-        values_ = [getattr(e, name) for e in estimates if getattr(e, name) is not None]
+        values_ = [e[name] for e in estimates if e[name] is not None]
         counts[name] = len(values_)
         if values_:
             measured[name], spread[name] = float(np.mean(values_)), (float(np.std(values_, ddof=1)) if len(values_) > 1 else 0.0)
@@ -398,6 +387,6 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
         counts=counts,
         mass_ratio=float(mass_ratio),
         Beq=measured.get("Beq"),
-        pushes=tuple(estimates),
+        pushes=len(estimates),
         notes=tuple(notes),
     )
