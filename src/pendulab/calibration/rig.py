@@ -73,7 +73,7 @@ class Rig(abc.ABC):
 
 
 class VirtualRig(Rig):
-    """The plant FMU with the pendulum removed, stepped at a fixed period.
+    """The plant FMU with the pendulum removed, stepped every :attr:`Rig.period` (1 ms).
 
     Parameters
     ----------
@@ -83,8 +83,6 @@ class VirtualRig(Rig):
         True friction vector ``[F1, v1, F2, v2, B]`` (overrides ``params``).
     x0 : float
         Where the cart stands when the run starts (m); off centre, so the procedure must centre it.
-    period : float
-        Step length (s), default 1 ms.
     backend : {"auto", "fmu", "casadi"}
         ``"fmu"`` steps ``Plant.fmu`` through fmpy (built on first use); ``"casadi"`` steps the CasADi model in-process (the same equations, no
         compiler needed); ``"auto"`` uses the FMU and falls back to CasADi when it cannot be built.
@@ -98,7 +96,6 @@ class VirtualRig(Rig):
         *,
         friction: Sequence[float] | None = None,
         x0: float = 0.05,
-        period: float = 1e-3,
         backend: str = "auto",
         progress: Callable[[str], None] | None = None,
     ) -> None:
@@ -109,9 +106,6 @@ class VirtualRig(Rig):
                 raise CalibrationError(f"the virtual rig's friction needs 5 numbers F1,v1,F2,v2,B, got {len(friction)}")
             params = params.with_values(**dict(zip(FRICTION_NAMES, friction)))
         self.params = params.with_values(**NO_PENDULUM)
-        if not period > 0:
-            raise CalibrationError(f"rig period {period} must be > 0 s")
-        self.period = float(period)
         self.x0 = float(x0)
         if backend not in ("auto", "fmu", "casadi"):
             raise CalibrationError(f"unknown virtual rig backend {backend!r}; choose auto, fmu or casadi")
