@@ -17,7 +17,7 @@ FREE = ("F1", "v1", "F2", "v2", "B", "Beq", "force_gain")
 def test_the_compiled_step_divides_by_no_constant():
     p = RIGS["sticky"]
     free, fixed = _split(np.asarray(p.as_vector(), dtype=float), FREE)
-    step = _step(10, free, fixed)
+    step = _step(free, fixed)
     # The cart's step divides only by constants (masses, motor constants, the RK4 weights): none is left.
     divisions = [k for k in range(step.n_instructions()) if step.instruction_id(k) == ca.OP_DIV]
     assert not divisions, f"{len(divisions)} divisions left"

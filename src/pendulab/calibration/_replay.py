@@ -100,8 +100,8 @@ void pendulab_run(int m, int n, const double *x0, const double *V, const double 
 
 
 @lru_cache(maxsize=None)
-def _step(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
-    """One RK4 sub-step of a replay sample (``n_sub`` of them), or the observer's with ``observer`` outputs (1: x; 2: x, alpha).
+def _step(free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
+    """One RK4 sub-step of a replay sample (the drivers run a sample's ``n_sub`` of them), or the observer's with ``observer`` outputs (1: x; 2: x, alpha).
 
     The replay: ``(s[4], V, t, r, sr[4], theta[n_free], h) -> s_next[4]`` (restarted from ``sr`` where ``r > 0.5``, its positions only, the speeds
     carried on, where ``r > 1.5``). The observer: ``(s[4], V, t, y[ny], gain[4 x ny], c, theta, h) -> (corrected[4], predicted[ny], corrected[4])``,
@@ -148,7 +148,7 @@ def _by_reciprocals(f: ca.Function) -> ca.Function:
 @lru_cache(maxsize=None)
 def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0) -> ca.Function:
     """One whole sample for CasADi's VM: :func:`_step`'s sub-steps as the compiled drivers run them (same operations, same bits), without ``c``."""
-    one = _step(n_sub, free, fixed, observer)
+    one = _step(free, fixed, observer)
     ins = [ca.SX.sym(one.name_in(i), one.sparsity_in(i)) for i in range(one.n_in())]
     s, V, t, h = ins[0], ins[1], ins[2], ins[-1]
     for j in range(n_sub):
@@ -160,7 +160,7 @@ def _sample(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observe
 
 def _source(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], observer: int = 0, ways: int = WAYS) -> str:
     """The C of :data:`_REPLAY` (or :data:`_OBSERVE`) around :func:`_step`, over :mod:`pendulab.simd`'s lanes."""
-    one = _step(n_sub, free, fixed, observer)
+    one = _step(free, fixed, observer)
     # Each input's nonzero j for group g: the group's own (its state, its sets' parameters) or one for every set, bc().
     given = ["bc(y[{j}])", "bc(gain[{j}])", "bc(c)"] if observer else ["bc(r)", "bc(sr[{j}])"]
     inputs = [lambda j, g, text=text: text.format(j=j, g=g) for text in ("s[{g}][{j}]", "bc(V)", "bc(t)", *given, "th[{g}][{j}]", "bc(h)")]
@@ -195,7 +195,7 @@ def _compiled(n_sub: int, free: tuple[int, ...], fixed: tuple[float, ...], obser
     # Named by its C alone (shared_library hashes it with the flags): keys that give the same C share one build.
     name = f"pendulab_{'observe' if observer else 'replay'}"
     source = _source(n_sub, free, fixed, observer, 1 if single else WAYS)
-    width = 1 if single else simd.lanes(_step(n_sub, free, fixed, observer))
+    width = 1 if single else simd.lanes(_step(free, fixed, observer))
     lanes = (f"-DLANES={width}",) if width else ()
     return _load(source, name, (*simd.FLAGS, *lanes)) or _load(source, name, ("-O2", *lanes))
 
