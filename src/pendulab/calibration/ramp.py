@@ -95,15 +95,6 @@ class _Run:
         recent = self.x[-n:] + [self.position]
         return max(recent) - min(recent) <= self.s.still_band
 
-    def wait_still(self) -> None:
-        """Motor off until the cart has not moved for ``still_time``."""
-        for _ in range(self.steps(self.s.phase_timeout)):
-            self.apply(0.0)
-            if self.is_still():
-                return
-        self.note("timeout waiting for the cart to stop")
-        raise _Stopped
-
     def centre(self) -> None:
         """P loop on x, with an integral that only acts while the cart is stuck off centre."""
         s, dt = self.s, self.rig.period
@@ -155,8 +146,12 @@ class _Run:
                         self.note(f"no breakaway up to {target:g} V")
                     break
         self.note(f"release {sign}")
-        self.wait_still()
-        return breakaway_at
+        for _ in range(self.steps(s.phase_timeout)):  # motor off until the cart has not moved for still_time
+            self.apply(0.0)
+            if self.is_still():
+                return breakaway_at
+        self.note("timeout waiting for the cart to stop")
+        raise _Stopped
 
 
 def run_ramp_test(
