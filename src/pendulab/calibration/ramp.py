@@ -90,10 +90,8 @@ class _Run:
 
     def is_still(self) -> bool:
         n = self.steps(self.s.still_time)
-        if len(self.x) < n:
-            return False
         recent = self.x[-n:] + [self.position]
-        return max(recent) - min(recent) <= self.s.still_band
+        return len(self.x) >= n and max(recent) - min(recent) <= self.s.still_band
 
     def centre(self) -> None:
         """P loop on x, with an integral that only acts while the cart is stuck off centre."""
