@@ -194,8 +194,7 @@ def run_ramp_test(
             run.note(f"iteration {i}")
             if on_iteration:
                 on_iteration(i, iterations)
-            for direction in (1, -1):
-                sign = "+" if direction > 0 else "-"
+            for direction, sign in ((1, "+"), (-1, "-")):
                 try:
                     breakaway = run.push(direction, "slow ramp", settings.ramp_rate, settings.max_voltage, settings.motion_distance)
                     if breakaway is None:
