@@ -80,8 +80,7 @@ def drive_and_drag(logs: Sequence[RampLog], params: PlantParameters) -> tuple[fl
     for _ in range(6):
         ridge = 1e-3 * np.count_nonzero(use)
         M = np.vstack([A[use] / scale, math.sqrt(ridge) * np.eye(2)])
-        z = lstsq(M, np.r_[y[use], math.sqrt(ridge) * prior * scale])
-        solution = z / scale
+        solution = lstsq(M, np.r_[y[use], math.sqrt(ridge) * prior * scale]) / scale
         residual = np.abs(dot(A, solution) - y)
         grown = residual <= 3.0 * (1.4826 * float(np.median(residual[use])) + 1e-9)  # within three robust spreads
         if np.array_equal(grown, use) or np.count_nonzero(grown) < 20:
