@@ -298,7 +298,6 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
     w = max(2, int(round(0.02 / dt)))  # 20 ms
     for push in pushes:
         direction = 1 if push.rate > 0 else -1
-        kind = "ramp" if push in ramps else "probe"
         rest = x[max(0, push.start - 50) : push.start + 1]
         noise = float(np.std(rest - np.median(rest)))
         threshold = max(3 * q, 6 * noise, 1e-6)
@@ -314,7 +313,7 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
         unmoved = np.flatnonzero(np.abs(x[k - w : k] - x_rest) <= max(0.5 * q, 3 * noise, 1e-7))
         j = k - w + int(unmoved[-1]) if unmoved.size else k - w
         # A cart that moved only after the release did not break away on the ramp itself.
-        F1 = K * abs(_onset_voltage(t, V, x, x_rest, direction, j, k)) if kind == "ramp" and j < push.release - 1 else None
+        F1 = K * abs(_onset_voltage(t, V, x, x_rest, direction, j, k)) if push in ramps and j < push.release - 1 else None
         onsets[push.start] = j
         values: dict[str, float | None] = {"v1": None, "v2": None, "B": None, "Beq": None}
         r = push.release
