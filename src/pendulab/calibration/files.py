@@ -267,7 +267,6 @@ def save_calibration(calibration: Calibration, path: str | os.PathLike[str]) -> 
     from pendulab.outputs import atomic_write
 
     try:
-        atomic_write(path, lambda handle: handle.write(text.encode("utf-8")))
+        return atomic_write(path, lambda handle: handle.write(text.encode("utf-8")))
     except OSError as exc:
         raise CalibrationError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return path

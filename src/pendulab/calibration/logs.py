@@ -454,5 +454,4 @@ def write_log(log: RampLog, path: str | os.PathLike[str]) -> Path:
     buffer = io.StringIO()
     np.savetxt(buffer, np.column_stack([getattr(log, n) for n in names]), delimiter=",", fmt="%.10g", header="\n".join(header), comments="")
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(path, lambda handle: handle.write(buffer.getvalue().encode("utf-8")))
-    return path
+    return atomic_write(path, lambda handle: handle.write(buffer.getvalue().encode("utf-8")))
