@@ -11,12 +11,10 @@ run each), from several starts (the given values, the logs' own estimate): each 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from pendulab import exact
-from pendulab.calibration._polish import Anchors, Space, scan_directions
+from pendulab.calibration._polish import Anchors, Polished, Space, scan_directions
 from pendulab.calibration._replay import observe, sample_period
 
 #: Observer bandwidths (rad/s), searched in turn: a wide basin first, then nearer the replay.
@@ -35,16 +33,6 @@ STEP_TOLERANCE = 3e-4
 LADDER = exact.power(10.0, np.arange(-2.0, 5.5, 0.5))
 #: Smallest scaled value a parameter takes in the search (its logarithm must exist).
 FLOOR = 1e-4
-
-
-@dataclass
-class Observed:
-    """An answer of the observer search: scaled values, cost (sum of squared weighted errors), effort."""
-
-    theta: np.ndarray
-    cost: float
-    iterations: int
-    runs: int
 
 
 def observer_gain(omega: float, period: float, zeta: float = ZETA, outputs: int = 1) -> np.ndarray:
@@ -73,8 +61,9 @@ def prediction_errors(logs: list[Anchors], space: Space, thetas: np.ndarray, ome
     return space.with_prior(np.nan_to_num(np.concatenate(rows, axis=1), nan=1e6, posinf=1e6, neginf=-1e6), np.atleast_2d(thetas))
 
 
-def levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, omega: float, max_iter: int) -> Observed:
-    """At most ``max_iter`` iterations from ``theta`` on the prediction errors at bandwidth ``omega``, in log coordinates."""
+def levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, omega: float, max_iter: int) -> Polished:
+    """At most ``max_iter`` iterations from ``theta`` on the prediction errors at bandwidth ``omega``, in log coordinates (its ``replays``: the
+    observer's batched runs)."""
     lower = exact.log(np.maximum(space.lower, FLOOR))
     upper = exact.log(np.maximum(space.upper, 2 * FLOOR))
 
@@ -83,7 +72,8 @@ def levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, om
 
     z = exact.log(np.maximum(space.project(np.asarray(theta, dtype=float).copy()), FLOOR))
     r = prediction_errors(logs, space, to_theta(z), omega)[0]
-    cost, damping, it = float(np.einsum("i,i->", r, r)), 1e-2, 0
+    cost = start_cost = float(np.einsum("i,i->", r, r))
+    damping, it = 1e-2, 0
     n = len(z)
     for it in range(1, max_iter + 1):
         moves = DIFFERENCE * np.eye(n)
@@ -102,10 +92,10 @@ def levenberg_marquardt(logs: list[Anchors], space: Space, theta: np.ndarray, om
         z, r, cost, damping = trials[best], R[best], float(costs[best]), max(damping * LADDER[best], 1e-8)
         if converged:
             break
-    return Observed(to_theta(z)[0], cost, it, 1 + 2 * it)  # runs: the start's, and two per iteration
+    return Polished(to_theta(z)[0], cost, start_cost, it, 1 + 2 * it)  # runs: the start's, and two per iteration
 
 
-def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Observed:
+def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Polished:
     """The observer search from ``starts`` (scaled values): see the module docstring.
 
     Examples
@@ -115,7 +105,7 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
     """
     tried = [levenberg_marquardt(logs, space, s, OMEGAS[0], START_ITERATIONS) for s in starts]
     best = min(tried, key=lambda o: o.cost)
-    runs, iterations = sum(o.runs for o in tried), sum(o.iterations for o in tried)
+    runs, iterations = sum(o.replays for o in tried), sum(o.iterations for o in tried)
     # Scans (scan_directions) for basins slow logs hide: on a slow triangle wave B folded into Beq is 0.6 % worse at OMEGAS[0], 8 % at OMEGAS[-1].
     omega = OMEGAS[-1]
 
@@ -125,5 +115,5 @@ def search(logs: list[Anchors], space: Space, starts: list[np.ndarray]) -> Obser
 
     scanned = scan_directions(logs, space, best.theta, rounds=1, cost_of=observed_costs)
     best = levenberg_marquardt(logs, space, scanned.theta, omega, MAX_ITERATIONS)
-    return Observed(best.theta, best.cost, iterations + best.iterations, runs + scanned.replays + best.runs)
+    return Polished(best.theta, best.cost, min(o.start_cost for o in tried), iterations + best.iterations, runs + scanned.replays + best.replays)
 

@@ -298,6 +298,8 @@ def replay_errors(logs: list[Anchors], vectors: np.ndarray, free: tuple[str, ...
 
 @dataclass
 class Polished:
+    """A search's answer: scaled values, cost (sum of squared weighted errors) and the start's, iterations, batched replays (or observer runs)."""
+
     theta: np.ndarray
     cost: float
     start_cost: float
@@ -552,10 +554,8 @@ def valley(logs: list[Anchors], space: Space, thetas: np.ndarray, moved_names: S
     grid = np.linspace(-1.0, 1.0, coarse)[None, :] * spans[:, None]  # (m, coarse), log offsets
     h = spans * 2.0 / (coarse - 1)
 
-    def trials(offsets: np.ndarray) -> np.ndarray:
-        T = np.repeat(thetas, offsets.shape[1], axis=0)
-        T[np.arange(T.shape[0]), np.repeat(k, offsets.shape[1])] *= exact.exp(offsets.ravel())
-        return np.array([space.project(t) for t in T])
+    def trials(offsets: np.ndarray) -> np.ndarray:  # each row's partner moved by each of its offsets
+        return np.vstack([along(space, theta, j, exact.exp(o)) for theta, j, o in zip(thetas, k, offsets)])
 
     T1 = trials(grid)
     c1 = costs(logs, space, T1).reshape(m, coarse)

@@ -359,9 +359,8 @@ SCAN_POINTS = 16
 #: The searches see at most this much of the logs (s), in pieces of PIECE_SECONDS spread over them.
 STAGE_SECONDS = 20.0
 PIECE_SECONDS = 4.0
-#: Logs longer than STAGE_SECONDS: CMA-ES (:func:`_evolved`) and the search along the common scale (:func:`_in_the_slip_region_only`) replay at most
-#: this much of them (s), in pieces chosen as for STAGE_SECONDS; what they find is polished on all the polish sees. Issue 19's time bar: on a 25 s
-#: slow-ramp log they took 25 of 37 CPU seconds. Not for shorter logs (16 s corpus: the bar met on 19 of 22 cases instead of 21).
+#: Logs longer than STAGE_SECONDS: CMA-ES (:func:`_evolved`) replays at most this much of them (s), in pieces chosen as for STAGE_SECONDS; what it
+#: finds is polished on all the polish sees. Issue 19's time bar: on a 25 s slow-ramp log it took 25 of 37 CPU seconds. Not for shorter logs (16 s corpus: the bar met on 19 of 22 cases instead of 21).
 SEARCH_SECONDS = 8.0
 
 
@@ -531,16 +530,6 @@ def _rival(setup: _Setup, theta: np.ndarray, cost: float) -> None:
         setup.rivals.append((np.array(theta, dtype=float), float(cost)))
 
 
-def _sampled(setup: _Setup, answer: _Answer) -> list[_polish.Anchors]:
-    """The answer's whole logs cut to what CMA-ES replays (``answer.searched`` itself where that is the whole logs too)."""
-    return _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)
-
-
-def _cost_there(setup: _Setup, sampled: list[_polish.Anchors], searched: list[_polish.Anchors], polished: _polish.Polished) -> float:
-    """``polished``'s cost on ``sampled`` (:func:`_sampled`): its own where that is what it was polished on."""
-    return polished.cost if sampled is searched else float(_polish.costs(sampled, setup.space, polished.theta[None])[0])
-
-
 def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEstimate],
                pieces: list[tuple[RampLog, int, int]] | None = None) -> list[_polish.Anchors]:
     """The logs' anchors cut to the pieces (default ``setup.pieces``; long logs are searched on pieces, each from a rest's restart or its state estimate)."""
@@ -575,7 +564,7 @@ def _observer_search(setup: _Setup) -> _Candidate:
     found = replace(found, theta=space.project(exact.significant(found.theta, START_DIGITS)))
     rms_observed = math.sqrt(found.cost / sum(a.measured.size for a in searched)) * float(np.mean([a.sigma[0] for a in searched]))
     setup.progress(f"searched {', '.join(names)} on an observer of the replay ({len(starts)} starts, {found.iterations} iterations, "
-                   f"{found.runs} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um")
+                   f"{found.replays} batched runs): one-sample prediction RMS {rms_observed * 1e6:.1f} um")
     omega, vector = _observer.OMEGAS[-1], space.vectors(found.theta[None])
     for j, (e, a) in enumerate(zip(whole, replays)):
         gain = _observer.observer_gain(omega, e.log.period, outputs=a.measured.shape[1])
@@ -658,11 +647,11 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
     above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, global_seeds)}[start]
     if answer.rms <= above * setup.step or (start == "search" and setup.with_pendulum) or len(setup.names) < 2:  # one parameter: the polish's scans
         return answer
-    sampled = _sampled(setup, answer)
+    sampled = _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)  # what CMA-ES replays (SEARCH_SECONDS)
     for i, seed in enumerate(seeds):
         if result.cost <= _cost_of(setup, searched, above) or (start == "search" and result is not answer.polished):
             break
-        here = _cost_there(setup, sampled, searched, result)
+        here = result.cost if sampled is searched else float(_polish.costs(sampled, space, result.theta[None])[0])  # on what CMA-ES replays
         if start == "start":
             theta, cost = _polish.evolve(sampled, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS,
                                          give_up=(GLOBAL_GENERATIONS // 2, here))
@@ -740,7 +729,8 @@ def _searched_again(setup: _Setup, before: _Answer, answer: _Answer) -> _Answer:
 
 def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
     """Stage 2, last: where the whole logs' replay stays in the slip region (:func:`slip_only`), the answer searched along its common scale,
-    moved :data:`SCALE_STEP` either way (:func:`_at_scale`), then on the way that lowered the cost, up to :data:`SCALE_STEPS` times."""
+    moved :data:`SCALE_STEP` either way (:func:`_at_scale`), then on the way that lowered the cost, up to :data:`SCALE_STEPS` times; on what the
+    polish replays (long logs: not CMA-ES's shorter pieces, where the scale moved the cart out of the slip region elsewhere)."""
     searched, result, names = answer.searched, answer.polished, setup.names
     if "scale" not in _polish.directions_of(names):
         return answer
@@ -749,26 +739,18 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
     regimes = [slip_shares(params, a.V, _replay.replay(vector, a.V, a.t, a.x0, a.restarts, free=names)[0]) for a in answer.replays]
     if not slip_only(*(sum(r[k] for r in regimes) for k in (0, 1))):
         return answer
-    sampled = _sampled(setup, answer)
-    moved, cost = result, _cost_there(setup, sampled, searched, result)
+    moved = result
     for sign in (1.0, -1.0):
         for _ in range(SCALE_STEPS):
-            found = _at_scale(setup, sampled, moved.theta, sign * SCALE_STEP)
-            if sampled is searched:
-                _rival(setup, found.theta, found.cost)
-            if found.cost >= cost:
+            found = _at_scale(setup, searched, moved.theta, sign * SCALE_STEP)
+            _rival(setup, found.theta, found.cost)
+            if found.cost >= moved.cost:
                 break
-            moved, cost = moved.then(found, replays=found.replays), found.cost
+            moved = moved.then(found, replays=found.replays)
         if moved is not result:
             break
     if moved is result:
         return answer
-    if sampled is not searched:
-        found = _polish.polish(searched, setup.space, moved.theta, max_iter=POLISH_ITER, scan=())
-        _rival(setup, found.theta, found.cost)
-        if found.cost >= result.cost:
-            return answer
-        moved = moved.then(found)
     rms = _replay_rms(setup, answer.replays, moved.theta)
     if rms >= answer.rms:  # better on a long log's pieces, worse on the whole: misled (_pieces)
         return answer
