@@ -56,7 +56,8 @@ def test_a_closed_loop_far_from_the_start_is_searched_again_from_the_global_sear
     # A rig nobody here made (a probe of session 38: F1 3 N, v1 2 mm/s, F2 3.6 N, v2 0.02 m/s, B 60), its closed loop fitted from the lab's
     # values: the observer search ended with B +2129 %, and an upright pendulum's replay restarts from the observer's states at that answer,
     # so no later stage got below 4 encoder steps (6.6 over its 8 s log). The global search from the start (one seed with the pendulum) got
-    # closer, and the search again from there replays this 4 s log at 1.59 steps, F1, B, Beq and the gain within 0.3 % (30 CPU-s).
+    # closer, and the search again from there replays this 4 s log at 1.59 steps, F1, B, Beq and the gain within 0.3 % (30 CPU-s). B is
+    # only bounded since B's own check (fit.HOPPED): held 35 % off with the others polished, this short log replays within twice the cost.
     worn = PlantParameters.preset("none", Beq=6.0, force_gain=0.85, F1=3.0, v1=0.002, F2=3.6, v2=0.02, B=60.0)
     true, lab = closed_loop_params(worn), PlantParameters.preset("none")
     said: list[str] = []
@@ -65,6 +66,10 @@ def test_a_closed_loop_far_from_the_start_is_searched_again_from_the_global_sear
     assert any(line.startswith("searched and polished again from there") for line in said)
     assert result.forward_rms < 2.0 * true.q_x
     for name in ("F1", "B", "Beq", "force_gain"):
+        assert abs(result.values[name] / getattr(true, name) - 1) < 0.05
+        if name == "B" and result.determination[name] == "bounded":
+            low, high = result.allowed[name]
+            assert low <= true.B <= high, (low, high)
+            continue
         assert result.determination[name] == "determined"
         assert abs(result.values[name] - getattr(true, name)) <= 3 * result.uncertainty[name]
-        assert abs(result.values[name] / getattr(true, name) - 1) < 0.05
