@@ -114,8 +114,7 @@ def test_a_search_run_that_ends_above_the_answer_is_not_polished(monkeypatch):
     """CMA-ES from the search's answer: a run whose best replays worse than the answer where it searched is left (the
     dev corpus's 9 such runs stayed above the answer when polished); one below it is polished."""
     setup, answer = _searched_on_pieces(monkeypatch)
-    sampled = fit_module._pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)  # what CMA-ES replays
-    here = float(_polish.costs(sampled, setup.space, answer.polished.theta[None])[0])
+    here = float(_polish.costs(fit_module._sampled(setup, answer), setup.space, answer.polished.theta[None])[0])
     polished = []
     monkeypatch.setattr(_polish, "polish", lambda logs, space, theta, **kwargs: polished.append(theta) or answer.polished)
     for claimed, runs in [(1.5 * here, 0), (0.5 * here, 2)]:

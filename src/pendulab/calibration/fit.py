@@ -531,6 +531,16 @@ def _rival(setup: _Setup, theta: np.ndarray, cost: float) -> None:
         setup.rivals.append((np.array(theta, dtype=float), float(cost)))
 
 
+def _sampled(setup: _Setup, answer: _Answer) -> list[_polish.Anchors]:
+    """The answer's whole logs cut to what CMA-ES replays (``answer.searched`` itself where that is the whole logs too)."""
+    return _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)
+
+
+def _cost_there(setup: _Setup, sampled: list[_polish.Anchors], searched: list[_polish.Anchors], polished: _polish.Polished) -> float:
+    """``polished``'s cost on ``sampled`` (:func:`_sampled`): its own where that is what it was polished on."""
+    return polished.cost if sampled is searched else float(_polish.costs(sampled, setup.space, polished.theta[None])[0])
+
+
 def _pieces_of(setup: _Setup, replays: list[_polish.Anchors], whole: list[_LogEstimate],
                pieces: list[tuple[RampLog, int, int]] | None = None) -> list[_polish.Anchors]:
     """The logs' anchors cut to the pieces (default ``setup.pieces``; long logs are searched on pieces, each from a rest's restart or its state estimate)."""
@@ -648,11 +658,11 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
     above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, global_seeds)}[start]
     if answer.rms <= above * setup.step or (start == "search" and setup.with_pendulum) or len(setup.names) < 2:  # one parameter: the polish's scans
         return answer
-    sampled = _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)  # what CMA-ES replays (SEARCH_SECONDS)
+    sampled = _sampled(setup, answer)
     for i, seed in enumerate(seeds):
         if result.cost <= _cost_of(setup, searched, above) or (start == "search" and result is not answer.polished):
             break
-        here = result.cost if sampled is searched else float(_polish.costs(sampled, space, result.theta[None])[0])  # on what CMA-ES replays
+        here = _cost_there(setup, sampled, searched, result)
         if start == "start":
             theta, cost = _polish.evolve(sampled, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS,
                                          give_up=(GLOBAL_GENERATIONS // 2, here))
@@ -743,8 +753,8 @@ def _in_the_slip_region_only(setup: _Setup, answer: _Answer) -> _Answer:
     searched, result, names = answer.searched, answer.polished, setup.names
     if "scale" not in _polish.directions_of(names) or not _stays_in_the_slip_region(setup, answer):
         return answer
-    sampled = _pieces_of(setup, answer.replays, answer.candidate.whole, setup.search_pieces)  # as CMA-ES (a 25 s log's stage: 3 CPU-s more on it all)
-    moved, cost = result, result.cost if sampled is searched else float(_polish.costs(sampled, setup.space, result.theta[None])[0])
+    sampled = _sampled(setup, answer)  # as CMA-ES (on all that the polish replays, a 25 s log's fit took 3 CPU-s more)
+    moved, cost = result, _cost_there(setup, sampled, searched, result)
     for sign in (1.0, -1.0):
         for _ in range(SCALE_STEPS):
             found = _at_scale(setup, sampled, moved.theta, sign * SCALE_STEP)
@@ -865,9 +875,9 @@ def _profiled(setup: _Setup, answer: _Answer, hopped: frozenset[str] = frozenset
     :data:`HOPPED` moves once: ``hopped``)."""
     space, searched, names = setup.space, answer.searched, setup.names
     prof = _polish.profile(searched, space, answer.polished.theta)
-    # Not B where the replay stays in the slip region: only bounded there whatever its profile (split_of_the_drag; a 25 s slow-ramp log: 1 CPU-s).
-    checked = [n for n in HOPPED if n != "B" or "Beq" not in names or not _stays_in_the_slip_region(setup, answer)]
-    for j in [j for j, n in enumerate(names) if n in checked and prof.status[j] == _polish.DETERMINED and n not in hopped]:
+    for j in [j for j, n in enumerate(names) if n in HOPPED and prof.status[j] == _polish.DETERMINED and n not in hopped]:
+        if names[j] == "B" and "Beq" in names and _stays_in_the_slip_region(setup, answer):
+            continue  # only bounded there whatever its profile (split_of_the_drag): the check would cost time only (a 25 s slow-ramp log: 1 CPU-s)
         theta = answer.polished.theta
         for offset in HOP_OFFSETS:
             value = theta[j] * math.exp(offset)
