@@ -655,7 +655,10 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
     with one seed (about 15 CPU-s on an 8 s closed loop)."""
     searched, space, result = answer.searched, setup.space, answer.polished
     global_seeds = GLOBAL_SEEDS[:1] if setup.with_pendulum else GLOBAL_SEEDS
-    above, seeds = {"answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS), "search": (0.0, (AROUND_SEED,) * 2), "start": (GLOBAL_ABOVE_STEPS, global_seeds)}[start]
+    above, seeds, sigma, generations, said = {
+        "answer": (EVOLVE_ABOVE_STEPS, EVOLVE_SEEDS, _polish.EVOLVE_SIGMA, _polish.EVOLVE_GENERATIONS, "the evolution strategy around the answer"),
+        "search": (0.0, (AROUND_SEED,) * 2, AROUND_SIGMA, AROUND_GENERATIONS, "CMA-ES from the search's answer"),
+        "start": (GLOBAL_ABOVE_STEPS, global_seeds, GLOBAL_SIGMA, GLOBAL_GENERATIONS, "the global search from the start")}[start]
     if answer.rms <= above * setup.step or (start == "search" and setup.with_pendulum) or len(setup.names) < 2:  # one parameter: the polish's scans
         return answer
     sampled = _sampled(setup, answer)
@@ -663,25 +666,20 @@ def _evolved(setup: _Setup, answer: _Answer, start: str = "answer", quiet: bool 
         if result.cost <= _cost_of(setup, searched, above) or (start == "search" and result is not answer.polished):
             break
         here = _cost_there(setup, sampled, searched, result)
-        if start == "start":
-            theta, cost = _polish.evolve(sampled, space, space.project(setup.theta0.copy()), math.inf, seed, GLOBAL_SIGMA, GLOBAL_GENERATIONS,
-                                         give_up=(GLOBAL_GENERATIONS // 2, here))
-        elif start == "search":
-            # From the search's answer, then the polished one (each went astray where the other found the rig's basin).
-            theta, cost = _polish.evolve(sampled, space, (answer.candidate.theta, result.theta)[i], math.inf, seed, AROUND_SIGMA, AROUND_GENERATIONS)
-        else:
-            theta, cost = _polish.evolve(sampled, space, result.theta, here, seed)
+        # "search": from the search's answer, then the polished one (each went astray where the other found the rig's basin).
+        origin = result.theta if start == "answer" else space.project(setup.theta0.copy()) if start == "start" else (answer.candidate.theta, result.theta)[i]
+        theta, cost = _polish.evolve(sampled, space, origin, here if start == "answer" else math.inf, seed, sigma, generations,
+                                     give_up=(generations // 2, here) if start == "start" else None)
         if cost < (1 - WALK_GAIN if start == "answer" else 1.0) * here:
             found = _polish.polish(searched, space, theta, max_iter=POLISH_ITER, scan=())
             _rival(setup, found.theta, found.cost)
             if found.cost < result.cost:
-                result = result.then(found, replays={"answer": _polish.EVOLVE_GENERATIONS, "search": AROUND_GENERATIONS, "start": GLOBAL_GENERATIONS}[start])
+                result = result.then(found, replays=generations)
         elif start == "search" and sampled is searched:
             _rival(setup, theta, cost)  # not polished: the dev corpus's 9 such runs stayed above the answer if polished (1.13 -> 1.08 at best)
     if result is answer.polished:
         return answer
-    rms, said = _replay_rms(setup, answer.replays, result.theta), {"answer": "the evolution strategy around the answer",
-                                                                   "search": "CMA-ES from the search's answer", "start": "the global search from the start"}[start]
+    rms = _replay_rms(setup, answer.replays, result.theta)
     if (searched is not answer.replays or start == "search") and rms >= answer.rms:  # better on a long log's pieces, worse on the whole: misled (_pieces)
         setup.progress(f"{said} found a lower cost on the searched pieces, but the whole logs replay worse (RMS {rms * 1e6:.0f} um): the answer stays")
         return answer
@@ -696,9 +694,7 @@ def _rescanned(setup: _Setup, answer: _Answer) -> _Answer:
     estimate, space, searched = answer.candidate.estimate, setup.space, answer.searched
     if estimate is None or answer.rms <= GLOBAL_ABOVE_STEPS * setup.step or not {"F2", "v2"} <= set(setup.names):
         return answer
-    theta = estimate.copy()
-    theta[setup.names.index("F2")] *= RESCAN_F2
-    theta = space.project(theta)
+    theta = space.project(estimate * np.where(np.array(setup.names) == "F2", RESCAN_F2, 1.0))
     cost = float(_polish.costs(searched, space, theta[None])[0])
     for name, span in [rescan for rescan in RESCAN if rescan[0] in setup.names] * RESCAN_ROUNDS:
         trials = _polish.along(space, theta, setup.names.index(name), exact.exp(np.linspace(-span, span, RESCAN_POINTS)))
@@ -790,10 +786,7 @@ def _at_scale(setup: _Setup, searched: list[_polish.Anchors], theta: np.ndarray,
     moved = _polish.moved(space, theta, "scale", offset)
     # The slip region's ends F2 and v2 not lowered: the logs bound them from below only, and lowered on 8 s of a 60 s log's pieces, the cart left
     # the slip region in the others (+4 %: their cost 1.3e5 -> 5e11; so the scale's search moved the gain -18 % -> -11 %, 1.45 -> 1.24 steps).
-    lower = space.lower.copy()
-    for i in [i for i, n in enumerate(setup.names) if n in ("F2", "v2")]:
-        lower[i] = max(lower[i], moved[i])
-    space = replace(space, lower=lower)
+    space = replace(space, lower=np.where(np.isin(setup.names, ("F2", "v2")), np.maximum(space.lower, moved), space.lower))
     held = space.holding("force_gain", moved[k])
     scanned = _polish.scan_directions(searched, held, np.delete(moved, k), rounds=1)  # a second round found the same on the unseen rig's ramps
     found = _polish.polish(searched, held, scanned.theta, max_iter=POLISH_ITER, work=POLISH_WORK, scan=())
@@ -808,10 +801,9 @@ def _voltage_lag(setup: _Setup, answer: _Answer, shifts: Sequence[int]) -> int:
         shifted = [replace(a, V=shifted_voltage(a.V, shift)) for a in answer.searched]
         return _observer.levenberg_marquardt(shifted, setup.space, answer.candidate.theta, _observer.OMEGAS[-1], LAG_PROBE_ITER).cost
 
-    unshifted = probed(0)
-    costs = {shift: probed(shift) for shift in shifts}
-    best = min(costs, key=costs.__getitem__)
-    return best if costs[best] < LAG_GAIN * unshifted else 0
+    costs = {shift: probed(shift) for shift in (0, *shifts)}
+    best = min(shifts, key=costs.__getitem__)
+    return best if costs[best] < LAG_GAIN * costs[0] else 0
 
 
 def shifted_voltage(V: np.ndarray, lag: int) -> np.ndarray:
