@@ -45,10 +45,11 @@ def true_replay_steps(log, true) -> float:
     from pendulab.calibration.fit import FORWARD_LIMIT_STEPS, _diverged, _initial_states, _noise_level  # private: the check, start states, noise
 
     with_pendulum = true.Mp > 0
-    used = ((len(log) - 1) // 10) * 10 + 1
-    nodes = _initial_states(log, with_pendulum)[:used:10].T
+    stride = max(1, int(round(0.01 / log.period)))  # the fit's default interval between state estimates
+    used = ((len(log) - 1) // stride) * stride + 1
+    nodes = _initial_states(log, with_pendulum)[:used:stride].T
     sigma = np.array([_noise_level(log.x[:used])] + ([_noise_level(log.alpha[:used])] if with_pendulum else []))
-    raw = _polish.anchors(log, used, nodes, 10, sigma, true.q_x, with_pendulum)
+    raw = _polish.anchors(log, used, nodes, stride, sigma, true.q_x, with_pendulum)
     if with_pendulum:  # an upright pendulum restarts from states that replay their stretches best, as the fit's do
         raw = _polish.settled(raw, np.asarray(true.as_vector(), dtype=float), None)
     best = math.inf
