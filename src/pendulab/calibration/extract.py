@@ -113,7 +113,7 @@ class FrictionEstimate:
 
     def to_calibration(self, **metadata: Any) -> Calibration:
         """A :class:`Calibration` holding ``friction`` and this estimate's measurement record."""
-        record = {
+        return Calibration(friction=self.friction, metadata={
             "method": "ramp test (SPEC 8)",
             "mass_ratio": self.mass_ratio,
             "measured_friction": dict(zip(FRICTION_NAMES, self.measured)),
@@ -123,8 +123,7 @@ class FrictionEstimate:
             "pushes": self.pushes,
             "notes": list(self.notes),
             **metadata,
-        }
-        return Calibration(friction=self.friction, metadata=record)
+        })
 
     def summary(self) -> str:
         lines = []
@@ -360,11 +359,11 @@ def extract_friction(log: RampLog, mass_ratio: float = 1.0, *, params: PlantPara
             # Once the cart is faster than v2 the drag is gone whatever F2 is: nothing more to learn.
             fast = np.flatnonzero(np.abs(x[lo + w : hi] - x[lo : hi - w]) / (w * dt) > 1.2 * measured["v2"])  # the speed
             hi = lo + w + int(fast[0]) + 50 if fast.size else hi
-            F2 = _fit_F2(log, lo, hi, fit_params, measured["F1"], 1.1 * F2_crit)
-        else:
+            F_high = 1.1 * F2_crit
+        else:  # a probe: up to a little above the largest force it applied (V leaves 0 at its start, so release > start)
             lo = max(0, push.start - 20)
-            F_high = K * float(np.max(np.abs(V[push.start : push.release]))) if push.release > push.start else 0.0
-            F2 = _fit_F2(log, lo, hi, fit_params, measured["F1"], 1.05 * F_high)
+            F_high = 1.05 * (K * float(np.max(np.abs(V[push.start : push.release]))))
+        F2 = _fit_F2(log, lo, hi, fit_params, measured["F1"], F_high)
         if F2 is not None:
             found[kind].append(F2)
     # A slow ramp resolves F2 far better than a probe (whose force jumps by rate*dt per sample).

@@ -114,21 +114,19 @@ class Calibration:
         if "friction" not in data:
             raise CalibrationError(f"{source}: missing 'friction' entry: give {{\"F1\", \"v1\", \"F2\", \"v2\", \"B\"}}")
         friction = data["friction"]
-        if isinstance(friction, Mapping):
-            missing = [n for n in FRICTION_NAMES if n not in friction]
-            if missing:
-                raise CalibrationError(f"{source}: friction is missing {', '.join(missing)}; give all of F1, v1, F2, v2, B")
-            extra = sorted(set(friction) - set(FRICTION_NAMES))
-            if extra:
-                raise CalibrationError(f"{source}: unknown friction entry {extra[0]!r}; the names are F1, v1, F2, v2, B")
-            values = {n: friction[n] for n in FRICTION_NAMES}
-        elif isinstance(friction, list):
+        if isinstance(friction, list):
             if len(friction) != 5:
                 raise CalibrationError(f"{source}: friction list needs 5 numbers [F1, v1, F2, v2, B], got {len(friction)}")
-            values = dict(zip(FRICTION_NAMES, friction))
-        else:
+            friction = dict(zip(FRICTION_NAMES, friction))  # then checked as an object
+        if not isinstance(friction, Mapping):
             raise CalibrationError(f"{source}: 'friction' must be an object {{\"F1\": ..., \"B\": ...}}, got {type(friction).__name__}")
-        checked = _validate(values, {n: data.get(n) for n in FITTED_NAMES}, source)
+        missing = [n for n in FRICTION_NAMES if n not in friction]
+        if missing:
+            raise CalibrationError(f"{source}: friction is missing {', '.join(missing)}; give all of F1, v1, F2, v2, B")
+        extra = sorted(set(friction) - set(FRICTION_NAMES))
+        if extra:
+            raise CalibrationError(f"{source}: unknown friction entry {extra[0]!r}; the names are F1, v1, F2, v2, B")
+        checked = _validate(friction, {n: data.get(n) for n in FITTED_NAMES}, source)
         metadata = data.get("metadata", {})
         if not isinstance(metadata, Mapping):
             raise CalibrationError(f"{source}: 'metadata' must be a JSON object, got {type(metadata).__name__}")
@@ -231,16 +229,14 @@ def _load_mat(path: Path) -> Calibration:
     if len(candidates) > 1:
         raise CalibrationError(f"{source} holds several 4/5-number vectors ({', '.join(sorted(candidates))}); keep only the friction vector in it")
     name = candidates[0]
-    vector = vectors[name]
+    values = [float(v) for v in vectors[name]]
     metadata: dict[str, Any] = {"source": str(path), "mat_variable": name, "method": "old lab .mat file"}
-    if len(vector) == 4:
-        F1, v1, B = (float(v) for v in vector[:3])
-        values = [F1, v1, OLD_LAB_F2_FACTOR * F1, OLD_LAB_V2, B]
+    if len(values) == 4:
         metadata["note"] = ("4-number vector read as the old lab read it: [F1, v1, B, unused], "
                             f"F2 = {OLD_LAB_F2_FACTOR:g}*F1, v2 = {OLD_LAB_V2:g} m/s")
-        metadata["old_lab_vector"] = [float(v) for v in vector]
-    else:
-        values = [float(v) for v in vector]
+        metadata["old_lab_vector"] = values
+        F1, v1, B, _ = values
+        values = [F1, v1, OLD_LAB_F2_FACTOR * F1, OLD_LAB_V2, B]
     checked = _validate(dict(zip(FRICTION_NAMES, values)), {}, source)
     return Calibration(friction=tuple(checked[n] for n in FRICTION_NAMES), metadata=metadata)  # type: ignore[arg-type]
 

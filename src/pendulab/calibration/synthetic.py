@@ -49,28 +49,20 @@ def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
     """
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration / STEP))) * STEP
-    if shape == "ramps with holds":
-        V = np.zeros_like(t)
-        start, sign = 0.3, 1.0
-        while start < duration - 1.0:
-            rise, peak, hold = rng.uniform(0.8, 1.6), rng.uniform(1.2, 3.0), 0.6
+    if shape in ("ramps with holds", "ramps with rests"):  # a ramp from 0 V each way in turn, a rest between
+        hold = 0.6 if shape == "ramps with holds" else 0.0  # held at the peak then down; else (faster, higher) dropped to 0 at the peak
+        start, margin, peaks, rests = (0.3, 1.0, (1.2, 3.0), (0.4, 0.8)) if hold else (0.5, 2.0, (2.5, 4.0), (0.6, 1.2))
+        V, sign = np.zeros_like(t), 1.0
+        while start < duration - margin:
+            rise, peak = rng.uniform(0.8, 1.6), rng.uniform(*peaks)
             up = (t >= start) & (t < start + rise)
             V[up] = sign * peak * (t[up] - start) / rise
-            held = (t >= start + rise) & (t < start + rise + hold)
-            V[held] = sign * peak
-            down = (t >= start + rise + hold) & (t < start + 2 * rise + hold)
-            V[down] = sign * peak * (1 - (t[down] - start - rise - hold) / rise)
-            start += 2 * rise + hold + rng.uniform(0.4, 0.8)
-            sign = -sign
-        return V
-    if shape == "ramps with rests":  # faster ramps to 2.5-4 V, dropped to 0 at the peak, rests between
-        V = np.zeros_like(t)
-        start, sign = 0.5, 1.0
-        while start < duration - 2.0:
-            rise, peak = rng.uniform(0.8, 1.6), rng.uniform(2.5, 4.0)
-            up = (t >= start) & (t < start + rise)
-            V[up] = sign * peak * (t[up] - start) / rise
-            start += rise + rng.uniform(0.6, 1.2)
+            if hold:
+                held = (t >= start + rise) & (t < start + rise + hold)
+                V[held] = sign * peak
+                down = (t >= start + rise + hold) & (t < start + 2 * rise + hold)
+                V[down] = sign * peak * (1 - (t[down] - start - rise - hold) / rise)
+            start += (2 * rise + hold if hold else rise) + rng.uniform(*rests)
             sign = -sign
         return V
     if shape == "triangle":
