@@ -81,14 +81,7 @@ class ProbeCase:
             return synthetic.closed_loop_log(self.rig_params, voltage_noise=self.voltage_noise)
         if self.shape == "calibrate ramp":
             return synthetic.calibrate_ramp_log(self.rig_params, voltage_noise=self.voltage_noise)
-        # The open-loop runs are made at synthetic.STEP and cached by shape and rig: another period, another run.
-        synthetic.STEP = self.period
-        synthetic._open_loop_run.cache_clear()  # private: its cache does not know the period
-        try:
-            return synthetic.synthetic_log(self.shape, self.rig_params, duration=16.0, voltage_noise=self.voltage_noise)
-        finally:
-            synthetic.STEP = 1e-3
-            synthetic._open_loop_run.cache_clear()  # private: as above
+        return synthetic.synthetic_log(self.shape, self.rig_params, duration=16.0, voltage_noise=self.voltage_noise, period=self.period)
 
 
 def probe_cases() -> list[ProbeCase]:

@@ -41,14 +41,14 @@ SHAPES = ("ramps with holds", "triangle", "random steps", "chirp", "closed loop"
 VOLTAGE_NOISE = (0.0, 0.01)
 
 
-def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
-    """Voltage samples (one per :data:`STEP`) of an open-loop shape.
+def voltage_profile(shape: str, duration: float, seed: int = 0, period: float = STEP) -> np.ndarray:
+    """Voltage samples (one per ``period``) of an open-loop shape.
 
     ``"ramps with holds"``: slow ramps to 1.2-3 V, held 0.6 s, down, rest, both ways; ``"ramps with rests"``: to 2.5-4 V, dropped at the peak;
     ``"triangle"``: 0.4 Hz, 3 V; ``"random steps"``: random size and sign, some below the breakaway; ``"chirp"``: 0.3 to 3 Hz with a slow offset.
     """
     rng = np.random.default_rng(seed)
-    t = np.arange(int(round(duration / STEP))) * STEP
+    t = np.arange(int(round(duration / period))) * period
     if shape in ("ramps with holds", "ramps with rests"):  # a ramp from 0 V each way in turn, a rest between
         hold = 0.6 if shape == "ramps with holds" else 0.0  # held at the peak then down; else (faster, higher) dropped to 0 at the peak
         start, margin, peaks, rests = (0.3, 1.0, (1.2, 3.0), (0.4, 0.8)) if hold else (0.5, 2.0, (2.5, 4.0), (0.6, 1.2))
@@ -74,7 +74,7 @@ def voltage_profile(shape: str, duration: float, seed: int = 0) -> np.ndarray:
         return levels[np.clip(np.searchsorted(edges, t), 0, levels.size - 1)]
     if shape == "chirp":
         f = 0.3 + (3.0 - 0.3) * t / duration
-        return 3.0 * exact.sin(2 * np.pi * np.cumsum(f) * STEP) + 0.4 * exact.sin(2 * np.pi * 0.1 * t)  # the same log on any CPU (pendulab.exact)
+        return 3.0 * exact.sin(2 * np.pi * np.cumsum(f) * period) + 0.4 * exact.sin(2 * np.pi * 0.1 * t)  # the same log on any CPU (pendulab.exact)
     raise ValueError(f"unknown open-loop shape {shape!r}; choose among ramps with holds, ramps with rests, triangle, random steps, chirp")
 
 
@@ -100,27 +100,27 @@ RUNS_CACHED = 64
 
 
 def synthetic_log(shape: str, params: PlantParameters = TRUE, duration: float = 20.0, *, noise: float = 1e-5,
-                  voltage_noise: float = 0.01, seed: int = 0, cart_hold: float = 0.35) -> RampLog:
-    """A log of an open-loop ``shape`` (:func:`voltage_profile`) on the rig ``params``.
+                  voltage_noise: float = 0.01, seed: int = 0, cart_hold: float = 0.35, period: float = STEP) -> RampLog:
+    """A log of an open-loop ``shape`` (:func:`voltage_profile`) on the rig ``params``, sampled every ``period`` (the drive held over each sample).
 
     A slow outer loop keeps the cart on its track: the profile is added to a weak position feedback (blocks of 0.1 s, as a TA would).
     """
-    V, x = _open_loop_run(shape, params, float(duration), seed, cart_hold)
-    return _measured(np.arange(x.size) * STEP, V, x, params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")
+    V, x = _open_loop_run(shape, params, float(duration), seed, cart_hold, float(period))
+    return _measured(np.arange(x.size) * period, V, x, params.q_x, noise, voltage_noise, seed + 100, f"synthetic {shape}")
 
 
 @lru_cache(maxsize=RUNS_CACHED)
-def _open_loop_run(shape: str, params: PlantParameters, duration: float, seed: int, cart_hold: float) -> tuple[np.ndarray, ...]:
+def _open_loop_run(shape: str, params: PlantParameters, duration: float, seed: int, cart_hold: float, period: float) -> tuple[np.ndarray, ...]:
     """:func:`synthetic_log`'s run: the voltage (0 after the last step) and the cart's position at each sample."""
-    V_plan = voltage_profile(shape, duration, seed)
+    V_plan = voltage_profile(shape, duration, seed, period)
     n = V_plan.size
     states = np.zeros((n + 1, 4))
     V = np.empty(n)
-    block = 100
+    block = int(round(0.1 / period))
     for i in range(0, n, block):
         x = states[i, 0]
         V[i : i + block] = np.clip(V_plan[i : i + block] - 20.0 * x * (abs(x) > cart_hold * 0.5), -params.V_max, params.V_max)
-        part = PlantModel().simulate(params, V[i : i + block], STEP, states[i], t0=i * STEP)
+        part = PlantModel().simulate(params, V[i : i + block], period, states[i], t0=i * period)
         states[i : i + part.shape[0]] = part
     return _frozen(np.append(V, 0.0), states[:, 0].copy())
 
